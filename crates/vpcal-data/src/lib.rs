@@ -1,0 +1,6 @@
+//! Training data for vpcal: the shared [`Sample`] type, data sources (BoxCars116k, synthetic
+//! crops), the paper's augmentation, heatmap targets and a streaming batch pipeline.
+
+mod sample;
+
+pub use sample::{Sample, SampleId, Split};

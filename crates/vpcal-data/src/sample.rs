@@ -1,0 +1,48 @@
+//! The one training-sample type shared by every data source (BoxCars116k, synthetic crops).
+
+/// One vehicle crop with its geometric ground truth, before augmentation.
+///
+/// All coordinates are in **crop pixels**: x right, y down, origin at the crop's top-left
+/// corner (pixel (0, 0) covers [0, 1) x [0, 1)). The crop may have any size; augmentation
+/// produces the network's input size.
+#[derive(Debug, Clone)]
+pub struct Sample {
+    /// Where the sample came from, used for the vehicle-level split and for error messages.
+    pub id: SampleId,
+    /// The crop (RGB, 8 bit).
+    pub image: image::RgbImage,
+    /// The 8 projected corners of the vehicle's 3D bounding box, crop pixels.
+    pub bb3d: [[f64; 2]; 8],
+    /// First vanishing point (direction the vehicle faces), crop pixels. Finite.
+    pub vp1: [f64; 2],
+    /// Second vanishing point (parallel to the road, orthogonal to VP1), crop pixels. Finite.
+    pub vp2: [f64; 2],
+}
+
+/// Identity of a sample: the vehicle and which of its instances (frames) this is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct SampleId {
+    /// Vehicle id; the split is `vehicle % 10` (0 validation, 1 test, else train).
+    pub vehicle: u64,
+    /// Instance index within the vehicle.
+    pub instance: u32,
+}
+
+/// Dataset split, by vehicle id (DESIGN.md §6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Split {
+    Train,
+    Validation,
+    Test,
+}
+
+impl Split {
+    /// The split a vehicle belongs to: `vehicle % 10 == 0` validation, `== 1` test, else train.
+    pub fn of_vehicle(vehicle: u64) -> Split {
+        match vehicle % 10 {
+            0 => Split::Validation,
+            1 => Split::Test,
+            _ => Split::Train,
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Safe Python-pickle reader (being written).

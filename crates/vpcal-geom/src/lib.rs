@@ -1,0 +1,1 @@
+//! vpcal-geom: see the crate description.

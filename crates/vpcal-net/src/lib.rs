@@ -1,0 +1,1 @@
+//! vpcal-net: see the crate description.

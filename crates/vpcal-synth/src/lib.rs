@@ -1,0 +1,1 @@
+//! vpcal-synth: see the crate description.

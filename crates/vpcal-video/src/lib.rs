@@ -1,0 +1,1 @@
+//! vpcal-video: see the crate description.

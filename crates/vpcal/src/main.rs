@@ -1,0 +1,42 @@
+//! `vpcal`: calibrate fixed traffic cameras from the vanishing points of the vehicles they see.
+//!
+//! A thin binary: flags are parsed by clap into one `Args` struct per subcommand (in `cmd/`),
+//! each subcommand validates its flags and calls the library crates. Errors are printed with
+//! their whole context chain and give exit code 1; bad flags give clap's exit code 2.
+
+mod cmd;
+
+use clap::{Parser, Subcommand};
+
+/// Calibrate fixed traffic cameras from the vanishing points of the vehicles they see.
+#[derive(Debug, Parser)]
+#[command(name = "vpcal", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+// One variant per subcommand; each lives in `cmd/<name>.rs` with `Args` and `run`.
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Turn per-vehicle VP pairs (a VPout JSON file) into a camera calibration.
+    Aggregate(cmd::aggregate::Args),
+    /// Evaluate calibrations against BrnoCompSpeed or BrnoCarPark ground truth.
+    #[command(subcommand)]
+    Eval(cmd::eval::EvalCommand),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Aggregate(args) => cmd::aggregate::run(args),
+        Command::Eval(args) => cmd::eval::run(args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
