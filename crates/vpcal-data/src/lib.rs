@@ -2,5 +2,7 @@
 //! crops), the paper's augmentation, heatmap targets and a streaming batch pipeline.
 
 mod sample;
+mod source;
 
 pub use sample::{Sample, SampleId, Split};
+pub use source::{Batch, DataError, SampleSource};
