@@ -1,0 +1,51 @@
+//! From per-vehicle VP pairs to one camera (DESIGN.md §7, paper §6.2).
+//!
+//! - [`reference`]: the paper's rule (medians of focal lengths, horizon slopes and
+//!   intercepts), reproduced exactly, including how the reference code treated NaN and
+//!   infinite values.
+
+pub mod reference;
+
+use crate::point::{BoxPx, Point2};
+
+/// One vehicle's evidence: its VP pair in frame pixels and what we know about its quality.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleVps {
+    /// VP1 (facing direction), frame pixels; may be non-finite.
+    pub vp1: Point2,
+    /// VP2 (axle direction), frame pixels; may be non-finite.
+    pub vp2: Point2,
+    /// Detector score of the vehicle's box.
+    pub score: f64,
+    /// The vehicle's box, frame pixels, when known.
+    pub box_px: Option<BoxPx>,
+    /// Frame index, when known.
+    pub frame: Option<f64>,
+    /// Decoder spread `D^s` of VP1 at the selected scale, when known.
+    pub vp1_spread: Option<f64>,
+    /// Decoder spread `D^s` of VP2 at the selected scale, when known.
+    pub vp2_spread: Option<f64>,
+}
+
+impl VehicleVps {
+    /// A pair with only VPs and a score.
+    pub fn new(vp1: Point2, vp2: Point2, score: f64) -> VehicleVps {
+        VehicleVps {
+            vp1,
+            vp2,
+            score,
+            box_px: None,
+            frame: None,
+            vp1_spread: None,
+            vp2_spread: None,
+        }
+    }
+}
+
+/// Why the evidence does not support a calibration.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AggregateError {
+    /// Too few usable vehicles, or the estimate is degenerate; the message says which.
+    #[error("not enough evidence: {0}")]
+    NotEnoughEvidence(String),
+}

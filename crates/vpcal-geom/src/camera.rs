@@ -1,0 +1,211 @@
+//! A camera from two orthogonal vanishing points (DESIGN.md §3, paper §3).
+//!
+//! With the principal point `pp` known (zero skew, square pixels, no distortion), two vanishing
+//! points `u`, `v` of orthogonal directions give the focal length
+//! `f = sqrt(-(u - pp)·(v - pp))`. Writing `V1 = (vp1 - pp, f)` and `V2 = (vp2 - pp, f)` for the
+//! directions in camera coordinates, the third direction is `V3 = V1 x V2`, its vanishing point
+//! `vp3 = V3[:2] / V3[2] · f + pp`, and the road-plane normal `n = normalize((vp3 - pp, f))`
+//! (equivalently `n ∝ Kᵀ h` for the horizon `h`, the line through vp1 and vp2).
+//!
+//! # Back-projection (BrnoCompSpeed convention)
+//! BrnoCompSpeed's evaluation places the camera centre at `C = (px, py, 0)`, gives pixel `p` the
+//! ray `r = (p - pp, f)`, and intersects it with the plane `n·X + 10 = 0`:
+//! `X(p) = C + t r`, `t = -(n·C + 10) / (n·r)`. A metric distance is `scale · |X(p1) - X(p2)|`.
+//! [`Calibration::project_to_road`] reproduces this exactly so that BCS `scale` values keep
+//! their meaning.
+//!
+//! # What is and isn't observable
+//! Two VPs fix `f` (given `pp`), the horizon, the road normal and the camera rotation against
+//! the road. They do not fix the camera height: distances are known up to one scale factor,
+//! which needs one known road distance ([`Calibration::scale_from_distance`]).
+
+use crate::point::{cross, dot3, normalize3, Line, Point2};
+
+/// Why no camera could be computed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GeomError {
+    /// An input point is NaN or infinite.
+    #[error("{what} is not finite ({value:?})")]
+    NonFinite { what: &'static str, value: Point2 },
+    /// The two vanishing points coincide.
+    #[error("vp1 and vp2 coincide at {0:?}")]
+    CoincidentVps(Point2),
+    /// `-(vp1 - pp)·(vp2 - pp)` is not positive: the pair is not orthogonal for any real focal.
+    #[error("imaginary focal length: -(vp1-pp)·(vp2-pp) = {value} is not positive")]
+    ImaginaryFocal { value: f64 },
+    /// The horizon passes through the principal point: the camera looks parallel to the road
+    /// and the road plane cannot be intersected.
+    #[error("the horizon passes through the principal point: the road plane is edge-on")]
+    EdgeOnRoad,
+}
+
+/// Focal length in pixels from two orthogonal VPs and the principal point, or `None` when the
+/// pair is inconsistent (non-positive value under the root, non-finite input).
+pub fn focal_from_vps(vp1: Point2, vp2: Point2, pp: Point2) -> Option<f64> {
+    let v = -(vp1 - pp).dot(vp2 - pp);
+    (v > 0.0 && v.is_finite()).then(|| v.sqrt())
+}
+
+/// The point on `line` whose direction is orthogonal to `vp1`'s for focal `focal_px`:
+/// `(vp1 - pp)·(vp2 - pp) = -f²`. `None` when that locus is parallel to `line`.
+pub fn orthogonal_vp_on_line(vp1: Point2, line: Line, focal_px: f64, pp: Point2) -> Option<Point2> {
+    let a = vp1.x - pp.x;
+    let b = vp1.y - pp.y;
+    // a (x - px) + b (y - py) + f² = 0
+    let locus = Line([a, b, -(a * pp.x + b * pp.y) + focal_px * focal_px]);
+    line.intersect(locus)
+}
+
+/// A calibrated camera: intrinsics (`focal_px`, `pp`) and the road plane, from two VPs.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Calibration {
+    /// Focal length, pixels.
+    pub focal_px: f64,
+    /// Principal point, frame pixels.
+    pub pp: Point2,
+    /// Vanishing point of the traffic direction (vehicles' facing), frame pixels.
+    pub vp1: Point2,
+    /// Vanishing point orthogonal to vp1 in the road plane, frame pixels.
+    pub vp2: Point2,
+    /// Vanishing point of the road normal, frame pixels.
+    pub vp3: Point2,
+    /// The horizon (line through vp1 and vp2), homogeneous, normalised so `a² + b² = 1`.
+    pub horizon: Line,
+    /// Unit road-plane normal in camera coordinates (x right, y down, z forward), pointing
+    /// towards `vp3` (the BCS convention: `normalize((vp3 - pp, f))`).
+    pub road_normal: [f64; 3],
+    /// Rotation from road coordinates to camera coordinates (determinant +1); its columns are
+    /// the unit directions of vp1, of vp2 (signed to make the frame right-handed) and the road
+    /// normal, in camera coordinates.
+    pub rotation: [[f64; 3]; 3],
+}
+
+impl Calibration {
+    /// The camera of two orthogonal vanishing points and a principal point.
+    ///
+    /// # Errors
+    /// [`GeomError`] for non-finite input (VPs at infinity), coincident VPs, an imaginary
+    /// focal length or an edge-on road plane.
+    pub fn from_vps(vp1: Point2, vp2: Point2, pp: Point2) -> Result<Calibration, GeomError> {
+        for (what, value) in [("vp1", vp1), ("vp2", vp2), ("principal point", pp)] {
+            if !value.is_finite() {
+                return Err(GeomError::NonFinite { what, value });
+            }
+        }
+        if vp1 == vp2 {
+            return Err(GeomError::CoincidentVps(vp1));
+        }
+        let focal_px = focal_from_vps(vp1, vp2, pp).ok_or(GeomError::ImaginaryFocal {
+            value: -(vp1 - pp).dot(vp2 - pp),
+        })?;
+        let d1 = [vp1.x - pp.x, vp1.y - pp.y, focal_px];
+        let d2 = [vp2.x - pp.x, vp2.y - pp.y, focal_px];
+        let d3 = cross(d1, d2);
+        // Relative test: the optical axis lies in the road plane when d3 has no z component.
+        if d3[2].abs() <= 1e-12 * dot3(d3, d3).sqrt() {
+            return Err(GeomError::EdgeOnRoad);
+        }
+        let vp3 = Point2::new(
+            d3[0] / d3[2] * focal_px + pp.x,
+            d3[1] / d3[2] * focal_px + pp.y,
+        );
+        let road_normal =
+            normalize3([vp3.x - pp.x, vp3.y - pp.y, focal_px]).ok_or(GeomError::NonFinite {
+                what: "vp3",
+                value: vp3,
+            })?;
+        let horizon = Line::through(vp1, vp2)
+            .and_then(Line::normalized)
+            .ok_or(GeomError::CoincidentVps(vp1))?;
+        let e1 = normalize3(d1).ok_or(GeomError::NonFinite {
+            what: "vp1",
+            value: vp1,
+        })?;
+        let e3 = road_normal;
+        // Right-handed frame: e2 = e3 x e1 is vp2's direction up to sign and rounding (vp1 and
+        // vp2 are orthogonal by construction of f); a VP fixes a direction only up to sign.
+        let e2 = cross(e3, e1);
+        let rotation = [
+            [e1[0], e2[0], e3[0]],
+            [e1[1], e2[1], e3[1]],
+            [e1[2], e2[2], e3[2]],
+        ];
+        Ok(Calibration {
+            focal_px,
+            pp,
+            vp1,
+            vp2,
+            vp3,
+            horizon,
+            road_normal,
+            rotation,
+        })
+    }
+
+    /// The intrinsic matrix `K = [[f, 0, px], [0, f, py], [0, 0, 1]]`.
+    pub fn k(&self) -> [[f64; 3]; 3] {
+        [
+            [self.focal_px, 0.0, self.pp.x],
+            [0.0, self.focal_px, self.pp.y],
+            [0.0, 0.0, 1.0],
+        ]
+    }
+
+    /// Angle between the optical axis and the road plane (camera pitch down), radians.
+    pub fn tilt(&self) -> f64 {
+        self.road_normal[2].abs().min(1.0).asin()
+    }
+
+    /// Roll: angle of the horizon against the image x axis, radians.
+    pub fn roll(&self) -> f64 {
+        self.horizon.angle()
+    }
+
+    /// Back-projection of pixel `p` onto the road plane in the BrnoCompSpeed convention
+    /// (module docs). `None` when the ray is parallel to the plane.
+    pub fn project_to_road(&self, p: Point2) -> Option<[f64; 3]> {
+        let c = [self.pp.x, self.pp.y, 0.0];
+        let r = [p.x - self.pp.x, p.y - self.pp.y, self.focal_px];
+        let t = -(dot3(self.road_normal, c) + 10.0) / dot3(self.road_normal, r);
+        let x = [c[0] + t * r[0], c[1] + t * r[1], c[2] + t * r[2]];
+        x.iter().all(|v| v.is_finite()).then_some(x)
+    }
+
+    /// Distance between the road points under two pixels, in plane units (multiply by a BCS
+    /// `scale` for metres).
+    pub fn road_distance(&self, p1: Point2, p2: Point2) -> Option<f64> {
+        let a = self.project_to_road(p1)?;
+        let b = self.project_to_road(p2)?;
+        let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        Some(dot3(d, d).sqrt())
+    }
+
+    /// The pixel that images road point `x` (the inverse of [`Calibration::project_to_road`]);
+    /// `None` for a point at the camera centre's depth.
+    pub fn image_of_road_point(&self, x: [f64; 3]) -> Option<Point2> {
+        let rel = [x[0] - self.pp.x, x[1] - self.pp.y, x[2]];
+        let p = Point2::new(
+            self.pp.x + rel[0] / rel[2] * self.focal_px,
+            self.pp.y + rel[1] / rel[2] * self.focal_px,
+        );
+        p.is_finite().then_some(p)
+    }
+
+    /// The BCS scale that makes the road distance between `p1` and `p2` equal `distance_m`.
+    pub fn scale_from_distance(&self, p1: Point2, p2: Point2, distance_m: f64) -> Option<f64> {
+        let d = self.road_distance(p1, p2)?;
+        let s = distance_m / d;
+        (d > 0.0 && s.is_finite() && s > 0.0).then_some(s)
+    }
+
+    /// Whether pixel `p` sees the road: its ray points to the road side of the horizon
+    /// (`n·r > 0`; for a camera looking down at the road the normal `n` of the BCS convention
+    /// points from the camera towards the ground).
+    ///
+    /// Note that the BCS back-projection also returns points for pixels above the horizon (and
+    /// its plane may lie behind the camera centre); use this to tell road pixels apart.
+    pub fn sees_road(&self, p: Point2) -> bool {
+        let r = [p.x - self.pp.x, p.y - self.pp.y, self.focal_px];
+        dot3(self.road_normal, r) > 0.0
+    }
+}

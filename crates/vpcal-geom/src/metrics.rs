@@ -1,0 +1,156 @@
+//! Calibration metrics (DESIGN.md §8): the pure-calibration ratio error of BrnoCompSpeed, the
+//! scaled distance error, the optimal-scale error of BrnoCarPark, and summary statistics.
+
+use crate::camera::Calibration;
+use crate::point::Point2;
+
+/// A measured distance between two road points seen at pixels `p1`, `p2`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RoadMeasurement {
+    pub p1: Point2,
+    pub p2: Point2,
+    pub distance_m: f64,
+}
+
+/// Mean, median, 95th percentile and maximum of a set of errors.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Summary {
+    /// Number of values.
+    pub n: usize,
+    pub mean: f64,
+    pub median: f64,
+    /// 95th percentile, linear interpolation between order statistics (numpy's default).
+    pub p95: f64,
+    pub max: f64,
+}
+
+/// Summary statistics of `values`; `None` when empty or when any value is not finite.
+pub fn summarize(values: &[f64]) -> Option<Summary> {
+    if values.is_empty() || values.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    Some(Summary {
+        n,
+        mean: sorted.iter().sum::<f64>() / n as f64,
+        median: percentile_sorted(&sorted, 50.0),
+        p95: percentile_sorted(&sorted, 95.0),
+        max: sorted[n - 1],
+    })
+}
+
+/// Percentile `q` (0-100) of sorted values with linear interpolation (numpy's default).
+/// NaN for an empty slice.
+pub fn percentile_sorted(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let pos = q / 100.0 * (sorted.len() - 1) as f64;
+    let lo = pos.floor() as usize;
+    let hi = pos.ceil() as usize;
+    let frac = pos - lo as f64;
+    if lo == hi {
+        sorted[lo]
+    } else {
+        sorted[lo] + (sorted[hi] - sorted[lo]) * frac
+    }
+}
+
+/// Median of finite values (mean of the two middle ones for an even count); `None` when empty.
+pub fn median(values: &[f64]) -> Option<f64> {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| !x.is_nan()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    })
+}
+
+/// Weighted median: a minimiser of `Σ w_i |x - x_i|` (the lower one when the minimum is a
+/// segment). `None` when empty or when no weight is positive.
+pub fn weighted_median(values: &[f64], weights: &[f64]) -> Option<f64> {
+    let mut pairs: Vec<(f64, f64)> = values
+        .iter()
+        .zip(weights)
+        .filter(|(v, w)| v.is_finite() && w.is_finite() && **w > 0.0)
+        .map(|(v, w)| (*v, *w))
+        .collect();
+    if pairs.is_empty() {
+        return None;
+    }
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = pairs.iter().map(|p| p.1).sum();
+    let mut acc = 0.0;
+    for (v, w) in &pairs {
+        acc += w;
+        if acc >= total / 2.0 {
+            return Some(*v);
+        }
+    }
+    pairs.last().map(|p| p.0)
+}
+
+/// Road distances (plane units) of the measurements under `calib`; `None` when any pixel
+/// cannot be projected.
+pub fn projected_distances(calib: &Calibration, m: &[RoadMeasurement]) -> Option<Vec<f64>> {
+    m.iter().map(|m| calib.road_distance(m.p1, m.p2)).collect()
+}
+
+/// Pure-calibration ratio errors, percent, for every unordered pair `(i, j)`, `i < j`, in
+/// lexicographic order: `|d̂_i/d̂_j - d_i/d_j| / (d_i/d_j) · 100`, with `d̂` the projected and
+/// `d` the true distances. `None` when a pixel cannot be projected or a ratio is not finite.
+pub fn ratio_errors(calib: &Calibration, m: &[RoadMeasurement]) -> Option<Vec<f64>> {
+    let projected = projected_distances(calib, m)?;
+    let mut out = Vec::with_capacity(m.len() * m.len().saturating_sub(1) / 2);
+    for i in 0..m.len() {
+        for j in i + 1..m.len() {
+            let est = projected[i] / projected[j];
+            let truth = m[i].distance_m / m[j].distance_m;
+            let e = (est - truth).abs() / truth * 100.0;
+            if !e.is_finite() {
+                return None;
+            }
+            out.push(e);
+        }
+    }
+    Some(out)
+}
+
+/// Scaled distance errors, percent: `|scale·d̂ - d| / d · 100` per measurement.
+pub fn scaled_distance_errors(
+    calib: &Calibration,
+    scale: f64,
+    m: &[RoadMeasurement],
+) -> Option<Vec<f64>> {
+    let projected = projected_distances(calib, m)?;
+    let out: Vec<f64> = projected
+        .iter()
+        .zip(m)
+        .map(|(d_hat, m)| (scale * d_hat - m.distance_m).abs() / m.distance_m * 100.0)
+        .collect();
+    out.iter().all(|e| e.is_finite()).then_some(out)
+}
+
+/// The scale minimising the mean relative distance error `Σ |s·d̂_i - d_i| / d_i`: the
+/// weighted median of `d_i / d̂_i` with weights `d̂_i / d_i`.
+pub fn optimal_scale(calib: &Calibration, m: &[RoadMeasurement]) -> Option<f64> {
+    let projected = projected_distances(calib, m)?;
+    let ratios: Vec<f64> = projected
+        .iter()
+        .zip(m)
+        .map(|(p, m)| m.distance_m / p)
+        .collect();
+    let weights: Vec<f64> = projected
+        .iter()
+        .zip(m)
+        .map(|(p, m)| p / m.distance_m)
+        .collect();
+    weighted_median(&ratios, &weights)
+}
