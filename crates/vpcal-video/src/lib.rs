@@ -1,1 +1,27 @@
-//! vpcal-video: see the crate description.
+//! vpcal-video: where vehicle crops come from.
+//!
+//! The first three arrows of the vpcal data flow (DESIGN.md §2):
+//!
+//! ```text
+//! frames (video via ffmpeg | image folder | single image), every k-th frame      source
+//!   -> vehicle boxes (motion detector | detections file | learned detector)      detect
+//!   -> per-frame filter: score threshold, drop static vehicles, keep the best 10  filter
+//!   -> crop each box, resize to the network input, batch                          crop
+//! ```
+//!
+//! # Entry points
+//! - [`source::open_source`] opens a video, image folder or image as a [`FrameSource`]
+//!   (an iterator of [`Frame`]s).
+//! - [`detect::Detector`] is the one detection trait.
+//!
+//! # Conventions
+//! - Frame pixels: x right, y down, origin at the top-left corner; pixel (i, j) covers
+//!   [i, i+1) × [j, j+1). Boxes ([`vpcal_geom::BoxPx`]) are continuous in these coordinates.
+//! - Frames are RGB, 8 bit, full resolution.
+//! - Frame indices are 0-based over all decoded frames of the source.
+
+pub mod error;
+pub mod source;
+
+pub use error::{Result, VideoError};
+pub use source::{open_source, Frame, FrameSource, SourceInfo, SourceKind, SourceOptions, Start};
