@@ -12,12 +12,26 @@ pub struct Sample {
     /// The crop (RGB, 8 bit).
     pub image: image::RgbImage,
     /// The 8 projected corners of the vehicle's 3D bounding box, crop pixels.
+    ///
+    /// Corner order (BoxCars116k's): 0-3 go round one horizontal face (front-left,
+    /// front-right, rear-right, rear-left) and 4-7 are the corners of the other horizontal face
+    /// in the same order (BoxCars puts the roof first, the synthetic renderer the floor; the
+    /// edges are the same either way): see [`BB3D_EDGES_VP1`], [`BB3D_EDGES_VP2`],
+    /// [`BB3D_EDGES_VERTICAL`].
     pub bb3d: [[f64; 2]; 8],
     /// First vanishing point (direction the vehicle faces), crop pixels. Finite.
     pub vp1: [f64; 2],
     /// Second vanishing point (parallel to the road, orthogonal to VP1), crop pixels. Finite.
     pub vp2: [f64; 2],
 }
+
+/// Corner pairs of [`Sample::bb3d`] whose edges run along the vehicle's length: their images
+/// meet at VP1.
+pub const BB3D_EDGES_VP1: [(usize, usize); 4] = [(0, 3), (1, 2), (4, 7), (5, 6)];
+/// Corner pairs whose edges run across the vehicle: their images meet at VP2.
+pub const BB3D_EDGES_VP2: [(usize, usize); 4] = [(0, 1), (3, 2), (4, 5), (7, 6)];
+/// Corner pairs whose edges are vertical: their images meet at VP3.
+pub const BB3D_EDGES_VERTICAL: [(usize, usize); 4] = [(0, 4), (1, 5), (2, 6), (3, 7)];
 
 /// Identity of a sample: the vehicle and which of its instances (frames) this is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

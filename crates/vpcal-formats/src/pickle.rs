@@ -773,6 +773,16 @@ impl<R: BufRead> Machine<R> {
             if deeper && done == pending.len() {
                 done = pending.len().saturating_sub(1);
             }
+            // An empty list on top of the innermost segment is most likely about to receive its
+            // first element (a vehicle whose first crop is being read).
+            let empty_list_on_top = !deeper
+                && done == pending.len()
+                && pending.last().is_some_and(
+                    |&id| matches!(self.nodes.get(id), Some(Node::List(v)) if v.is_empty()),
+                );
+            if empty_list_on_top {
+                done = pending.len() - 1;
+            }
             match self.nodes.get(container) {
                 Some(Node::List(items)) => path.push_str(&format!("[{}]", items.len() + done)),
                 Some(Node::Dict(_)) if done % 2 == 1 => match self.nodes.get(pending[done - 1]) {
@@ -782,9 +792,15 @@ impl<R: BufRead> Machine<R> {
                 },
                 _ => break,
             }
-            if !deeper || p + done + 1 != end {
-                break;
+            if deeper && p + done + 1 == end {
+                continue;
             }
+            // The element in progress is a list filled without a MARK (a single APPEND): its
+            // own element in progress is the next one.
+            if let Some(Node::List(items)) = pending.get(done).and_then(|&id| self.nodes.get(id)) {
+                path.push_str(&format!("[{}]", items.len()));
+            }
+            break;
         }
         (!path.is_empty()).then_some(path)
     }

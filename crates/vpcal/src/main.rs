@@ -19,11 +19,15 @@ struct Cli {
 // One variant per subcommand; each lives in `cmd/<name>.rs` with `Args` and `run`.
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Training data: preview the augmentation, benchmark the batch pipeline.
+    #[command(subcommand)]
+    Data(cmd::data::DataCommand),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    let result: anyhow::Result<()> = match cli.command {
+    let result = match cli.command {
+        Command::Data(args) => cmd::data::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

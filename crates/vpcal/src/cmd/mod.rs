@@ -1,1 +1,3 @@
 //! Subcommands: one module each, with `Args` and `run`.
+
+pub mod data;
