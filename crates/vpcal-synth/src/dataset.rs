@@ -1,0 +1,248 @@
+//! The crop directory format (see `FORMAT.md`): writer and reader.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use vpcal_data::{DataError, Sample, SampleId, Split};
+
+use crate::crops::{CropConfig, CropGenerator, CropMeta, CropSample};
+use crate::SynthError;
+
+/// The text of `FORMAT.md`, also written into every crop directory.
+pub const FORMAT_MD: &str = include_str!("../FORMAT.md");
+
+/// One line of `samples.jsonl`.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct SampleRecord {
+    pub vehicle: u64,
+    pub instance: u32,
+    pub image: String,
+    pub width: u32,
+    pub height: u32,
+    pub bb3d: [[f64; 2]; 8],
+    pub vp1: [f64; 2],
+    pub vp2: [f64; 2],
+    pub box2d: [f64; 4],
+    pub meta: CropMeta,
+}
+
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct ConfigFile {
+    format: String,
+    version: u32,
+    seed: u64,
+    count: u64,
+    config: CropConfig,
+}
+
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SynthError> {
+    let tmp = path.with_extension(format!(
+        "{}.tmp",
+        path.extension().and_then(|e| e.to_str()).unwrap_or("")
+    ));
+    std::fs::write(&tmp, bytes).map_err(|e| SynthError::io(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| SynthError::io(path, e))
+}
+
+/// Generate `count` crops (global indices 0..count) into `dir`, in parallel. `progress` is
+/// called with the number of crops finished so far.
+///
+/// # Errors
+/// I/O errors (naming the file) and generation errors.
+pub fn write_crops(
+    dir: &Path,
+    generator: &CropGenerator,
+    count: u64,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<(), SynthError> {
+    let images = dir.join("images");
+    std::fs::create_dir_all(&images).map_err(|e| SynthError::io(&images, e))?;
+    write_atomic(&dir.join("FORMAT.md"), FORMAT_MD.as_bytes())?;
+    let cfg = ConfigFile {
+        format: "vpcal-synth-crops".into(),
+        version: 1,
+        seed: generator.seed(),
+        count,
+        config: generator.config().clone(),
+    };
+    let cfg_json = serde_json::to_vec_pretty(&cfg).map_err(|e| SynthError::Format {
+        path: dir.join("config.json"),
+        message: e.to_string(),
+    })?;
+    write_atomic(&dir.join("config.json"), &cfg_json)?;
+    let mut lines = String::new();
+    let chunk = 64u64;
+    let mut start = 0u64;
+    while start < count {
+        let end = (start + chunk).min(count);
+        let done: Vec<Result<String, SynthError>> = (start..end)
+            .into_par_iter()
+            .map(|i| {
+                let c = generator.generate_index(i)?;
+                let rec = record_of(&c);
+                write_atomic(&dir.join(&rec.image), &c.jpeg)?;
+                serde_json::to_string(&rec).map_err(|e| SynthError::Format {
+                    path: dir.join("samples.jsonl"),
+                    message: e.to_string(),
+                })
+            })
+            .collect();
+        for line in done {
+            lines.push_str(&line?);
+            lines.push('\n');
+        }
+        progress(end);
+        start = end;
+    }
+    let path = dir.join("samples.jsonl");
+    let tmp = dir.join("samples.jsonl.tmp");
+    {
+        let mut f = std::fs::File::create(&tmp).map_err(|e| SynthError::io(&tmp, e))?;
+        f.write_all(lines.as_bytes())
+            .map_err(|e| SynthError::io(&tmp, e))?;
+        f.sync_all().map_err(|e| SynthError::io(&tmp, e))?;
+    }
+    std::fs::rename(&tmp, &path).map_err(|e| SynthError::io(&path, e))
+}
+
+/// The JSON record of a crop.
+pub fn record_of(c: &CropSample) -> SampleRecord {
+    let s = &c.sample;
+    let h = crate::crops::hull(&s.bb3d);
+    SampleRecord {
+        vehicle: s.id.vehicle,
+        instance: s.id.instance,
+        image: format!("images/{:07}_{}.jpg", s.id.vehicle, s.id.instance),
+        width: s.image.width(),
+        height: s.image.height(),
+        bb3d: s.bb3d,
+        vp1: s.vp1,
+        vp2: s.vp2,
+        box2d: [h.0, h.1, h.2, h.3],
+        meta: c.meta.clone(),
+    }
+}
+
+/// Reads a crop directory as a [`vpcal_data::SampleSource`] of one split.
+#[derive(Debug, Clone)]
+pub struct CropDirSource {
+    dir: PathBuf,
+    split: Split,
+    records: Vec<SampleRecord>,
+}
+
+impl CropDirSource {
+    /// Open `dir` and keep the samples of `split`.
+    ///
+    /// # Errors
+    /// [`DataError::File`] when `samples.jsonl` is missing or a line is malformed (with its
+    /// line number and what was expected).
+    pub fn open(dir: &Path, split: Split) -> Result<CropDirSource, DataError> {
+        let all = read_records(dir)?;
+        let records = all
+            .into_iter()
+            .filter(|r| Split::of_vehicle(r.vehicle) == split)
+            .collect();
+        Ok(CropDirSource {
+            dir: dir.to_path_buf(),
+            split,
+            records,
+        })
+    }
+
+    /// All records of this split (metadata without loading images).
+    pub fn records(&self) -> &[SampleRecord] {
+        &self.records
+    }
+}
+
+/// Read and validate every line of `dir/samples.jsonl`.
+///
+/// # Errors
+/// As [`CropDirSource::open`].
+pub fn read_records(dir: &Path) -> Result<Vec<SampleRecord>, DataError> {
+    let path = dir.join("samples.jsonl");
+    let text = std::fs::read_to_string(&path).map_err(|e| DataError::File {
+        path: path.clone(),
+        message: format!("cannot read the crop index ({e}); is this a `vpcal synth crops` directory that finished writing?"),
+    })?;
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let rec: SampleRecord = serde_json::from_str(line).map_err(|e| DataError::File {
+            path: path.clone(),
+            message: format!("line {}: {e} (see FORMAT.md for the fields)", n + 1),
+        })?;
+        let finite = rec
+            .bb3d
+            .iter()
+            .flatten()
+            .chain(&rec.vp1)
+            .chain(&rec.vp2)
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(DataError::File {
+                path: path.clone(),
+                message: format!("line {}: bb3d/vp1/vp2 must be finite numbers", n + 1),
+            });
+        }
+        out.push(rec);
+    }
+    Ok(out)
+}
+
+impl vpcal_data::SampleSource for CropDirSource {
+    fn len(&self) -> usize {
+        self.records.len()
+    }
+    fn split(&self) -> Split {
+        self.split
+    }
+    fn get(&self, index: usize) -> Result<Sample, DataError> {
+        let rec = self.records.get(index).ok_or_else(|| DataError::File {
+            path: self.dir.join("samples.jsonl"),
+            message: format!(
+                "index {index} out of range ({} samples)",
+                self.records.len()
+            ),
+        })?;
+        let path = self.dir.join(&rec.image);
+        let sample_name = format!("{}_{}", rec.vehicle, rec.instance);
+        let bytes = std::fs::read(&path).map_err(|e| DataError::Sample {
+            path: path.clone(),
+            sample: sample_name.clone(),
+            message: e.to_string(),
+        })?;
+        let image = crate::post::decode_jpeg(&bytes).map_err(|e| DataError::Sample {
+            path: path.clone(),
+            sample: sample_name.clone(),
+            message: format!("not a readable JPEG: {e}"),
+        })?;
+        if image.width() != rec.width || image.height() != rec.height {
+            return Err(DataError::Sample {
+                path,
+                sample: sample_name,
+                message: format!(
+                    "image is {}x{}, samples.jsonl says {}x{}",
+                    image.width(),
+                    image.height(),
+                    rec.width,
+                    rec.height
+                ),
+            });
+        }
+        Ok(Sample {
+            id: SampleId {
+                vehicle: rec.vehicle,
+                instance: rec.instance,
+            },
+            image,
+            bb3d: rec.bb3d,
+            vp1: rec.vp1,
+            vp2: rec.vp2,
+        })
+    }
+}

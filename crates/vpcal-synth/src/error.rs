@@ -1,0 +1,42 @@
+//! The crate's error type.
+
+use std::path::PathBuf;
+
+/// Errors from rendering and from reading or writing synthetic data sets.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: image: {source}")]
+    Image {
+        path: PathBuf,
+        #[source]
+        source: image::ImageError,
+    },
+    /// A file exists but its content is not what the format says.
+    #[error("{path}: {message}")]
+    Format { path: PathBuf, message: String },
+    /// Invalid parameters (which one, what was given, what is allowed).
+    #[error("invalid configuration: {0}")]
+    Config(String),
+    /// The `ffmpeg` subprocess failed.
+    #[error("ffmpeg writing {path}: {message}")]
+    Ffmpeg { path: PathBuf, message: String },
+    /// The generator could not place a vehicle after many attempts (should not happen with
+    /// sane parameters).
+    #[error("could not generate {what} after {attempts} attempts")]
+    Exhausted { what: String, attempts: usize },
+}
+
+impl SynthError {
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> SynthError {
+        SynthError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}

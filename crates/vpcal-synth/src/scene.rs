@@ -1,0 +1,1231 @@
+//! Scenes: a fixed camera over a road layout with moving (and parked) traffic, rendered to a
+//! video and described by BrnoCompSpeed-like ground truth.
+//!
+//! Output layout for a scene named `<name>` under `OUT`:
+//! ```text
+//! OUT/dataset/<name>/video.mp4            H.264 (ffmpeg), frame k = k-th rendered frame
+//! OUT/dataset/<name>/frames/000000.png    (optional frame folder)
+//! OUT/dataset/<name>/screen.png           frame 0
+//! OUT/dataset/<name>/overlay.png          frame 0 with the true horizon, VPs and 3D boxes
+//! OUT/dataset/<name>/gt_data.json         {"fps", "distanceMeasurement": [{p1, p2, distance, toVP1}],
+//!                                          "measurementLines": [], "laneDivLines": [],
+//!                                          "invalidLanes": [], "cars": []}
+//! OUT/dataset/<name>/detections.csv       frame,x0,y0,x1,y1,score (true boxes, score 1.0)
+//! OUT/dataset/<name>/vehicles.jsonl       per frame and vehicle: box, bb3d, vp1, vp2, pose, ...
+//! OUT/dataset/<name>/camera.json          K, R, position, height, vp1, vp2, vp3, horizon, ...
+//! OUT/results/<name>/system_groundtruth.json  {"camera_calibration": {vp1, vp2, pp, scale}, "cars": []}
+//! ```
+//! All image coordinates use the crate's pixel convention (pixel (i, j) covers
+//! [i, i+1) x [j, j+1)); the principal point written is the true one (the image centre).
+
+use std::f64::consts::{FRAC_PI_2, PI};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use rand::Rng;
+use rayon::prelude::*;
+
+use crate::camera::Camera;
+use crate::crops::{hull, project_box};
+use crate::math::{rng_for, RngExt, V3};
+use crate::mesh::{Mesh, Pose};
+use crate::raster::{Backdrop, Target, NEAR_M};
+use crate::shade::Lighting;
+use crate::vehicle::{VehicleKind, VehicleSpec};
+use crate::world::{generate_world, Ground, LayoutKind, World, WorldParams};
+use crate::SynthError;
+
+/// Everything that defines a scene. Unset camera parameters are drawn from the seed.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SceneSpec {
+    pub name: String,
+    pub layout: LayoutKind,
+    pub seed: u64,
+    pub width: u32,
+    pub height: u32,
+    pub fps: f64,
+    pub frames: u32,
+    pub focal_px: Option<f64>,
+    pub height_m: Option<f64>,
+    pub pitch_deg: Option<f64>,
+    pub roll_deg: Option<f64>,
+    /// Camera yaw relative to the main road direction (degrees).
+    pub yaw_rel_deg: Option<f64>,
+    /// Supersampling per axis (1 is fine for video; 2 for stills).
+    pub supersample: u32,
+    /// Gaussian blur sigma (px) and noise sigma (8-bit levels) applied to every frame.
+    pub blur_sigma: f64,
+    pub noise_sigma: f64,
+}
+
+impl SceneSpec {
+    /// A scene with every camera parameter drawn from the seed.
+    pub fn new(name: &str, layout: LayoutKind, seed: u64) -> SceneSpec {
+        SceneSpec {
+            name: name.to_string(),
+            layout,
+            seed,
+            width: 1280,
+            height: 720,
+            fps: 25.0,
+            frames: 100,
+            focal_px: None,
+            height_m: None,
+            pitch_deg: None,
+            roll_deg: None,
+            yaw_rel_deg: None,
+            supersample: 1,
+            blur_sigma: 0.55,
+            noise_sigma: 2.0,
+        }
+    }
+
+    /// Check the parameters.
+    ///
+    /// # Errors
+    /// [`SynthError::Config`] naming the bad value.
+    pub fn validate(&self) -> Result<(), SynthError> {
+        let bad = |m: String| Err(SynthError::Config(m));
+        if self.name.is_empty() || self.name.contains(['/', '\\']) || self.name.starts_with('.') {
+            return bad(format!(
+                "scene name {:?} must be a plain directory name",
+                self.name
+            ));
+        }
+        if self.width < 64
+            || self.height < 64
+            || self.width % 2 != 0
+            || self.height % 2 != 0
+            || self.width > 8192
+            || self.height > 8192
+        {
+            return bad(format!(
+                "size {}x{}: width and height must be even, 64..8192",
+                self.width, self.height
+            ));
+        }
+        if !(self.fps > 0.0 && self.fps <= 240.0) {
+            return bad(format!("fps {} must be in (0, 240]", self.fps));
+        }
+        if self.frames == 0 {
+            return bad("frames must be >= 1".into());
+        }
+        if let Some(f) = self.focal_px {
+            if !(50.0..=50_000.0).contains(&f) {
+                return bad(format!("focal {f} px outside 50..50000"));
+            }
+        }
+        if let Some(h) = self.height_m {
+            if !(1.0..=200.0).contains(&h) {
+                return bad(format!("camera height {h} m outside 1..200"));
+            }
+        }
+        if let Some(p) = self.pitch_deg {
+            if !(2.0..=85.0).contains(&p) {
+                return bad(format!(
+                    "pitch {p} deg outside 2..85 (the camera must look down at the road)"
+                ));
+            }
+        }
+        if !(1..=4).contains(&self.supersample) {
+            return bad(format!("supersample {} outside 1..=4", self.supersample));
+        }
+        Ok(())
+    }
+}
+
+/// (layout, width, height, focal px, camera height m, pitch deg, roll deg, yaw relative to the road deg)
+type SuiteRow = (LayoutKind, u32, u32, f64, f64, f64, f64, f64);
+
+/// The benchmark suite: 14 scenes with different cameras (focal 600-4000 px, pitch, roll,
+/// height) and layouts. Deterministic for `seed`.
+pub fn suite_specs(frames: u32, seed: u64) -> Vec<SceneSpec> {
+    // (layout, width, height, focal, height_m, pitch, roll, yaw_rel)
+    let table: [SuiteRow; 14] = [
+        (
+            LayoutKind::Highway,
+            1920,
+            1080,
+            4000.0,
+            12.0,
+            9.0,
+            0.5,
+            12.0,
+        ),
+        (
+            LayoutKind::Highway,
+            1920,
+            1080,
+            2600.0,
+            9.0,
+            12.0,
+            -2.0,
+            25.0,
+        ),
+        (
+            LayoutKind::Highway,
+            1920,
+            1080,
+            1800.0,
+            7.0,
+            16.0,
+            1.5,
+            -18.0,
+        ),
+        (
+            LayoutKind::Highway,
+            1280,
+            720,
+            1100.0,
+            10.0,
+            24.0,
+            -3.5,
+            35.0,
+        ),
+        (LayoutKind::Highway, 1280, 720, 600.0, 6.0, 30.0, 4.0, -8.0),
+        (
+            LayoutKind::Highway,
+            1920,
+            1080,
+            3200.0,
+            15.0,
+            14.0,
+            -1.0,
+            172.0,
+        ),
+        (LayoutKind::Curve, 1920, 1080, 2200.0, 11.0, 15.0, 2.5, 20.0),
+        (LayoutKind::Curve, 1280, 720, 900.0, 8.0, 28.0, -1.5, -30.0),
+        (
+            LayoutKind::Curve,
+            1920,
+            1080,
+            1400.0,
+            18.0,
+            35.0,
+            0.0,
+            150.0,
+        ),
+        (
+            LayoutKind::Intersection,
+            1920,
+            1080,
+            1200.0,
+            12.0,
+            32.0,
+            1.0,
+            40.0,
+        ),
+        (
+            LayoutKind::Intersection,
+            1280,
+            720,
+            700.0,
+            9.0,
+            42.0,
+            -2.5,
+            -55.0,
+        ),
+        (
+            LayoutKind::Parking,
+            1920,
+            1080,
+            1000.0,
+            14.0,
+            38.0,
+            2.0,
+            30.0,
+        ),
+        (
+            LayoutKind::Parking,
+            1280,
+            720,
+            650.0,
+            20.0,
+            50.0,
+            -3.0,
+            -65.0,
+        ),
+        (LayoutKind::Highway, 1280, 720, 2000.0, 25.0, 20.0, 3.0, 5.0),
+    ];
+    table
+        .iter()
+        .enumerate()
+        .map(|(i, &(layout, w, h, f, hm, pitch, roll, yaw))| SceneSpec {
+            width: w,
+            height: h,
+            frames,
+            focal_px: Some(f),
+            height_m: Some(hm),
+            pitch_deg: Some(pitch),
+            roll_deg: Some(roll),
+            yaw_rel_deg: Some(yaw),
+            ..SceneSpec::new(
+                &format!("synth{:02}_{}", i + 1, layout.name()),
+                layout,
+                seed.wrapping_mul(1000).wrapping_add(i as u64 + 1),
+            )
+        })
+        .collect()
+}
+
+/// A vehicle in the simulation.
+#[derive(Debug, Clone)]
+struct Agent {
+    id: u32,
+    spec: VehicleSpec,
+    mesh: Mesh,
+    /// Lane index and arc length, or a fixed pose when parked.
+    lane: Option<usize>,
+    s: f64,
+    v: f64,
+    v0: f64,
+    headway_s: f64,
+    accel: f64,
+    pose: Pose,
+}
+
+/// Camera, world, light and traffic of a scene, ready to render.
+#[derive(Debug)]
+pub struct SceneState {
+    pub spec: SceneSpec,
+    pub camera: Camera,
+    pub world: World,
+    pub light: Lighting,
+    agents: Vec<Agent>,
+    next_id: u32,
+    time_s: f64,
+    rng: rand_chacha::ChaCha8Rng,
+}
+
+/// Ground truth of one vehicle in one frame.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct VehicleTruth {
+    pub frame: u32,
+    pub id: u32,
+    pub kind: VehicleKind,
+    /// Hull of the projected 3D box (image pixels, may extend outside the image).
+    #[serde(rename = "box")]
+    pub box2d: [f64; 4],
+    /// The hull clipped to the image.
+    pub box_clipped: [f64; 4],
+    pub bb3d: [[f64; 2]; 8],
+    /// VPs in image pixels; `None` (null) when at infinity.
+    pub vp1: Option<[f64; 2]>,
+    pub vp2: Option<[f64; 2]>,
+    pub pose: Pose,
+    pub dims_m: [f64; 3],
+    pub speed_mps: f64,
+    pub parked: bool,
+    /// Fraction of the vehicle's own silhouette that is visible (not occluded, inside the image).
+    pub visible_fraction: f64,
+}
+
+impl SceneState {
+    /// Build the scene from its spec (deterministic) and run the traffic warm-up.
+    ///
+    /// # Errors
+    /// [`SynthError::Config`] for invalid specs; [`SynthError::Exhausted`] when no camera could
+    /// be placed to see the road.
+    pub fn new(spec: &SceneSpec) -> Result<SceneState, SynthError> {
+        spec.validate()?;
+        let mut rng = rng_for(spec.seed, &[0x5CE4E]);
+        let (w, h) = (f64::from(spec.width), f64::from(spec.height));
+        for _attempt in 0..50 {
+            let f = spec.focal_px.unwrap_or_else(|| w * rng.log_uni(0.5, 2.5));
+            let hm = spec.height_m.unwrap_or_else(|| rng.uni(5.0, 20.0));
+            let pitch = spec.pitch_deg.unwrap_or_else(|| match spec.layout {
+                LayoutKind::Parking | LayoutKind::Intersection => rng.uni(20.0, 50.0),
+                _ => rng.uni(8.0, 30.0),
+            });
+            let roll = spec.roll_deg.unwrap_or_else(|| rng.normal() * 2.5);
+            let yaw_rel = spec.yaw_rel_deg.unwrap_or_else(|| match spec.layout {
+                LayoutKind::Parking | LayoutKind::Intersection => rng.uni(-80.0, 80.0),
+                _ => rng.uni(-35.0, 35.0) + if rng.chance(0.3) { 180.0 } else { 0.0 },
+            });
+            let heading = rng.uni(-PI, PI);
+            let yaw = heading + yaw_rel.to_radians();
+            // The image centre looks at the focus point (origin of the layout).
+            let dist = hm / pitch.to_radians().tan();
+            let pos = V3::new(-dist * yaw.cos(), -dist * yaw.sin(), hm);
+            let camera = Camera::from_angles(
+                spec.width,
+                spec.height,
+                f,
+                pos,
+                yaw,
+                pitch.to_radians(),
+                roll.to_radians(),
+            );
+            let world_rng_seed: u64 = rng.random();
+            let mut wrng = rng_for(world_rng_seed, &[]);
+            let mut world = generate_world(
+                &mut wrng,
+                WorldParams {
+                    layout: spec.layout,
+                    focus: [0.0, 0.0],
+                    heading,
+                    clutter: rng.uni(0.3, 0.9),
+                },
+            );
+            clear_view(&mut world, &camera);
+            // The main road's VP must be finite and the road visible.
+            let (Some(_), Some(_)) = (
+                camera.vp_of_heading(world.main_heading),
+                camera.vp_of_heading(world.main_heading + FRAC_PI_2),
+            ) else {
+                continue;
+            };
+            let visible_lanes = world.lanes.iter().filter(|l| {
+                let len = l.path.length();
+                (0..20).any(|k| {
+                    let p = l.path.pose_at(len * f64::from(k) / 19.0);
+                    camera
+                        .project(V3::new(p.x, p.y, 0.0))
+                        .is_some_and(|q| camera.in_image(q))
+                })
+            });
+            if visible_lanes.count() == 0 {
+                continue;
+            }
+            let mut light = Lighting::random(&mut rng);
+            light.exposure = rng.uni(0.8, 1.15) as f32 / light.ground_irradiance(0.0)[1];
+            let sim_seed: u64 = rng.random();
+            let mut state = SceneState {
+                spec: spec.clone(),
+                camera,
+                world,
+                light,
+                agents: Vec::new(),
+                next_id: 0,
+                time_s: 0.0,
+                rng: rng_for(sim_seed, &[]),
+            };
+            let _ = (w, h);
+            state.park();
+            // Warm up so the road is already busy at frame 0.
+            for _ in 0..600 {
+                state.step(0.1);
+            }
+            state.time_s = 0.0;
+            return Ok(state);
+        }
+        Err(SynthError::Exhausted {
+            what: format!("a camera that sees the {} road", spec.layout.name()),
+            attempts: 50,
+        })
+    }
+
+    fn park(&mut self) {
+        let occupancy = self.rng.uni(0.4, 0.9);
+        let stalls = self.world.stalls.clone();
+        for st in stalls {
+            if !self.rng.chance(occupancy) {
+                continue;
+            }
+            let kind = if self.rng.chance(0.88) {
+                [
+                    VehicleKind::Sedan,
+                    VehicleKind::Hatchback,
+                    VehicleKind::Wagon,
+                    VehicleKind::Suv,
+                ][self.rng.int(0, 3) as usize]
+            } else {
+                VehicleKind::Van
+            };
+            let spec = VehicleSpec::random(&mut self.rng, kind);
+            let mut pose = st;
+            if self.rng.chance(0.35) {
+                pose.heading += PI;
+            }
+            pose.heading =
+                crate::world::wrap_angle(pose.heading + (self.rng.normal() * 2.5).to_radians());
+            let mesh = spec.build();
+            let id = self.next_id;
+            self.next_id += 1;
+            self.agents.push(Agent {
+                id,
+                spec,
+                mesh,
+                lane: None,
+                s: 0.0,
+                v: 0.0,
+                v0: 0.0,
+                headway_s: 0.0,
+                accel: 0.0,
+                pose,
+            });
+        }
+    }
+
+    /// Advance the traffic by `dt` seconds (intelligent-driver model, signals, spawning).
+    fn step(&mut self, dt: f64) {
+        let t = self.time_s;
+        let phase = if self.world.signal_cycle_s > 0.0 {
+            ((t / self.world.signal_cycle_s).floor() as i64).rem_euclid(2) as u32
+        } else {
+            0
+        };
+        // Amber: the last 3 s of a phase nobody new enters.
+        let amber = self.world.signal_cycle_s > 0.0
+            && (t % self.world.signal_cycle_s) > self.world.signal_cycle_s - 3.0;
+        let mut acc = vec![0.0; self.agents.len()];
+        for (i, a) in self.agents.iter().enumerate() {
+            let Some(li) = a.lane else { continue };
+            let lane = &self.world.lanes[li];
+            let mut gap = f64::INFINITY;
+            let mut lead_v = 0.0;
+            let (sn, cs) = a.pose.heading.sin_cos();
+            for (j, b) in self.agents.iter().enumerate() {
+                if j == i {
+                    continue;
+                }
+                let dx = b.pose.x - a.pose.x;
+                let dy = b.pose.y - a.pose.y;
+                let lx = dx * cs + dy * sn;
+                let ly = -dx * sn + dy * cs;
+                if lx <= 0.0 || lx > 80.0 || ly.abs() > (a.spec.width + b.spec.width) / 2.0 + 0.3 {
+                    continue;
+                }
+                let g = lx - (a.spec.length + b.spec.length) / 2.0;
+                if g < gap {
+                    gap = g;
+                    lead_v = b.v * (b.pose.heading - a.pose.heading).cos();
+                }
+            }
+            if let Some((p, stop)) = lane.signal {
+                let front = a.s + a.spec.length / 2.0;
+                if (p != phase || amber) && front < stop + 0.5 {
+                    let g = stop - front;
+                    // Can we stop? Otherwise go through.
+                    let need = a.v * a.v / (2.0 * 4.0);
+                    if (g > need * 0.8 || p != phase) && g.max(0.01) < gap {
+                        gap = g.max(0.01);
+                        lead_v = 0.0;
+                    }
+                }
+            }
+            // IDM.
+            let (s0, b_comf) = (2.0, 2.5);
+            let dv = a.v - lead_v;
+            let s_star = s0 + a.v * a.headway_s + a.v * dv / (2.0 * (a.accel * b_comf).sqrt());
+            let free = 1.0 - (a.v / a.v0.max(0.1)).powi(4);
+            let inter = if gap.is_finite() {
+                (s_star.max(0.0) / gap.max(0.1)).powi(2)
+            } else {
+                0.0
+            };
+            acc[i] = (a.accel * (free - inter)).max(-9.0);
+        }
+        for (a, ac) in self.agents.iter_mut().zip(acc) {
+            let Some(li) = a.lane else { continue };
+            a.v = (a.v + ac * dt).max(0.0);
+            a.s += a.v * dt;
+            a.pose = self.world.lanes[li].path.pose_at(a.s);
+        }
+        // Despawn at the end of the path.
+        let lanes = &self.world.lanes;
+        self.agents
+            .retain(|a| a.lane.is_none_or(|li| a.s < lanes[li].path.length()));
+        // Spawn.
+        for li in 0..self.world.lanes.len() {
+            let lane = &self.world.lanes[li];
+            if !self.rng.chance(lane.rate * dt) {
+                continue;
+            }
+            let spec = VehicleSpec::random_any(&mut self.rng);
+            let start = lane.path.pose_at(0.0);
+            let clear = self.agents.iter().all(|b| {
+                let d = ((b.pose.x - start.x).powi(2) + (b.pose.y - start.y).powi(2)).sqrt();
+                d > (spec.length + b.spec.length) / 2.0 + 8.0
+            });
+            if !clear {
+                continue;
+            }
+            let heavy = matches!(spec.kind, VehicleKind::Truck | VehicleKind::Bus);
+            let v0 = lane.speed_mps * self.rng.uni(0.85, 1.12) * if heavy { 0.8 } else { 1.0 };
+            let mesh = spec.build();
+            let id = self.next_id;
+            self.next_id += 1;
+            let headway_s = self.rng.uni(1.0, 1.8);
+            let accel = if heavy { 0.8 } else { self.rng.uni(1.2, 2.0) };
+            self.agents.push(Agent {
+                id,
+                spec,
+                mesh,
+                lane: Some(li),
+                s: 0.0,
+                v: v0 * 0.9,
+                v0,
+                headway_s,
+                accel,
+                pose: start,
+            });
+        }
+        self.time_s += dt;
+    }
+
+    /// Main-road VP pair (vp1 = road direction, vp2 = its horizontal normal), image pixels.
+    pub fn main_vps(&self) -> Option<([f64; 2], [f64; 2])> {
+        let h = self.world.main_heading;
+        Some((
+            self.camera.vp_of_heading(h)?,
+            self.camera.vp_of_heading(h + FRAC_PI_2)?,
+        ))
+    }
+}
+
+/// Remove props that stand next to the camera or would fill a large part of the view.
+pub fn clear_view(world: &mut World, cam: &Camera) {
+    let area = f64::from(cam.width) * f64::from(cam.height);
+    world.props.retain(|p| {
+        let c = (p.lo + p.hi) * 0.5;
+        let dxy = ((c.x - cam.position.x).powi(2) + (c.y - cam.position.y).powi(2)).sqrt();
+        let radius = ((p.hi.x - p.lo.x).powi(2) + (p.hi.y - p.lo.y).powi(2)).sqrt() / 2.0;
+        if dxy < radius + 6.0 && p.hi.z > cam.position.z - 3.0 {
+            return false;
+        }
+        let mut pts = Vec::new();
+        for x in [p.lo.x, p.hi.x] {
+            for y in [p.lo.y, p.hi.y] {
+                for z in [p.lo.z, p.hi.z] {
+                    let q = cam.to_camera(V3::new(x, y, z));
+                    if q.z < NEAR_M {
+                        // Partly behind the camera: keep only if small and low.
+                        if dxy < 40.0 {
+                            return false;
+                        }
+                        continue;
+                    }
+                    if let Some(r) = cam.project_cam(q) {
+                        pts.push(r);
+                    }
+                }
+            }
+        }
+        if pts.is_empty() {
+            return true;
+        }
+        let (x0, y0, x1, y1) = hull(&pts);
+        let cw = (x1.min(f64::from(cam.width)) - x0.max(0.0)).max(0.0);
+        let ch = (y1.min(f64::from(cam.height)) - y0.max(0.0)).max(0.0);
+        // A thin pole may cross the frame; anything wide and tall in the view goes.
+        cw * ch < 0.12 * area || cw < 0.04 * f64::from(cam.width)
+    });
+}
+
+/// The static part of the picture (road, props, their shadows), in horizontal bands.
+struct StaticLayer {
+    bands: Vec<Target>,
+}
+
+const BAND_ROWS: usize = 48;
+
+impl StaticLayer {
+    fn new(state: &SceneState) -> StaticLayer {
+        let cam = &state.camera;
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let ss = state.spec.supersample;
+        let starts: Vec<usize> = (0..h).step_by(BAND_ROWS).collect();
+        let bands = starts
+            .par_iter()
+            .map(|&y0| {
+                let rows = BAND_ROWS.min(h - y0);
+                let mut t = Target::new(0.0, y0 as f64, w, rows, ss);
+                for p in &state.world.props {
+                    t.draw(cam, &state.light, &p.mesh.tris, 1);
+                }
+                for p in state.world.props.iter().filter(|p| p.casts_shadow) {
+                    t.draw_shadow(cam, &state.light, &p.mesh.tris);
+                }
+                t.fill_background(cam, &state.light, Backdrop::World(&state.world));
+                t.shade.iter_mut().for_each(|s| *s = 1.0);
+                t
+            })
+            .collect();
+        StaticLayer { bands }
+    }
+}
+
+/// A rendered frame and the truth of the vehicles in it.
+#[derive(Debug)]
+pub struct Frame {
+    pub image: image::RgbImage,
+    pub vehicles: Vec<VehicleTruth>,
+}
+
+/// A rendered band and, per vehicle id, (visible samples, samples when drawn alone).
+type BandResult = (image::RgbImage, Vec<(u32, usize, usize)>);
+
+/// Renders the frames of a scene one by one.
+pub struct SceneRenderer {
+    pub state: SceneState,
+    layer: StaticLayer,
+    frame: u32,
+}
+
+impl std::fmt::Debug for SceneRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SceneRenderer")
+            .field("scene", &self.state.spec.name)
+            .field("frame", &self.frame)
+            .finish()
+    }
+}
+
+impl SceneRenderer {
+    /// # Errors
+    /// As [`SceneState::new`].
+    pub fn new(spec: &SceneSpec) -> Result<SceneRenderer, SynthError> {
+        let state = SceneState::new(spec)?;
+        let layer = StaticLayer::new(&state);
+        Ok(SceneRenderer {
+            state,
+            layer,
+            frame: 0,
+        })
+    }
+
+    /// Render the next frame (and then advance the traffic by one frame interval).
+    pub fn next_frame(&mut self) -> Frame {
+        let st = &self.state;
+        let cam = &st.camera;
+        let light = &st.light;
+        // Vehicles worth drawing: in front of the camera.
+        let placed: Vec<(&Agent, Mesh)> = st
+            .agents
+            .iter()
+            .filter(|a| {
+                let c = cam.to_camera(V3::new(a.pose.x, a.pose.y, 0.0));
+                c.z > -a.spec.length && c.z < 2000.0
+            })
+            .map(|a| (a, a.mesh.placed(&a.pose)))
+            .collect();
+        let ao = 0.35 + 0.3 * (1.0 - light.shadow_strength);
+        let results: Vec<BandResult> = self
+            .layer
+            .bands
+            .par_iter()
+            .map(|band| {
+                let mut t = band.clone();
+                for (a, m) in &placed {
+                    t.draw(cam, light, &m.tris, 1000 + a.id);
+                }
+                for (a, m) in &placed {
+                    t.draw_shadow(cam, light, &m.tris);
+                    t.draw_contact_shadow(cam, &a.pose, a.spec.length, a.spec.width, ao);
+                }
+                t.apply_shade();
+                let mut counts = Vec::with_capacity(placed.len());
+                let mut seen = std::collections::HashMap::new();
+                for &id in &t.id {
+                    if id >= 1000 {
+                        *seen.entry(id - 1000).or_insert(0usize) += 1;
+                    }
+                }
+                for (a, m) in &placed {
+                    let vis = seen.get(&a.id).copied().unwrap_or(0);
+                    let alone = t.coverage(cam, &m.tris);
+                    counts.push((a.id, vis, alone));
+                }
+                (t.resolve(light), counts)
+            })
+            .collect();
+        let (w, h) = (cam.width, cam.height);
+        let mut image = image::RgbImage::new(w, h);
+        let mut vis_total: std::collections::HashMap<u32, (usize, usize)> =
+            std::collections::HashMap::new();
+        let mut y = 0u32;
+        for (band, counts) in &results {
+            image::imageops::replace(&mut image, band, 0, i64::from(y));
+            y += band.height();
+            for &(id, v, a) in counts {
+                let e = vis_total.entry(id).or_insert((0, 0));
+                e.0 += v;
+                e.1 += a;
+            }
+        }
+        // Silhouette parts outside the image count as invisible.
+        let mut vehicles = Vec::new();
+        for (a, _) in &placed {
+            let Some(b) = project_box(cam, &a.spec, &a.pose) else {
+                continue;
+            };
+            let (x0, y0, x1, y1) = hull(&b);
+            let (fw, fh) = (f64::from(w), f64::from(h));
+            let clipped = [x0.max(0.0), y0.max(0.0), x1.min(fw), y1.min(fh)];
+            if clipped[2] <= clipped[0] || clipped[3] <= clipped[1] {
+                continue;
+            }
+            let (v, alone) = vis_total.get(&a.id).copied().unwrap_or((0, 0));
+            // `alone` only counts samples inside the image; scale by the box area inside.
+            let inside = ((clipped[2] - clipped[0]) * (clipped[3] - clipped[1]))
+                / ((x1 - x0) * (y1 - y0)).max(1e-9);
+            let visible_fraction = if alone > 0 {
+                (v as f64 / alone as f64) * inside
+            } else {
+                0.0
+            };
+            vehicles.push(VehicleTruth {
+                frame: self.frame,
+                id: a.id,
+                kind: a.spec.kind,
+                box2d: [x0, y0, x1, y1],
+                box_clipped: clipped,
+                bb3d: b,
+                vp1: cam.vp_of_heading(a.pose.heading),
+                vp2: cam.vp_of_heading(a.pose.heading + FRAC_PI_2),
+                pose: a.pose,
+                dims_m: [a.spec.length, a.spec.width, a.spec.height],
+                speed_mps: a.v,
+                parked: a.lane.is_none(),
+                visible_fraction: visible_fraction.min(1.0),
+            });
+        }
+        vehicles.sort_by_key(|v| v.id);
+        let mut rng = rng_for(st.spec.seed, &[0xF4A3E, u64::from(self.frame)]);
+        post_frame(
+            &mut image,
+            st.spec.blur_sigma,
+            st.spec.noise_sigma,
+            &mut rng,
+        );
+        let dt = 1.0 / st.spec.fps;
+        self.state.step(dt);
+        self.frame += 1;
+        Frame { image, vehicles }
+    }
+}
+
+/// Blur and noise for a whole frame, parallel over rows.
+fn post_frame<R: Rng>(img: &mut image::RgbImage, blur: f64, noise: f64, rng: &mut R) {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let mut buf: Vec<f32> = img.as_raw().iter().map(|&v| f32::from(v)).collect();
+    if blur > 0.05 {
+        let s = blur as f32;
+        let r = (s * 3.0).ceil().max(1.0) as i64;
+        let k: Vec<f32> = (-r..=r)
+            .map(|i| (-(i * i) as f32 / (2.0 * s * s)).exp())
+            .collect();
+        let ks: f32 = k.iter().sum();
+        let k: Vec<f32> = k.iter().map(|v| v / ks).collect();
+        let mut tmp = vec![0.0f32; buf.len()];
+        tmp.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+            for x in 0..w {
+                let mut acc = [0.0f32; 3];
+                for (t, kv) in k.iter().enumerate() {
+                    let xx = (x as i64 + t as i64 - r).clamp(0, w as i64 - 1) as usize;
+                    let i = (y * w + xx) * 3;
+                    acc[0] += buf[i] * kv;
+                    acc[1] += buf[i + 1] * kv;
+                    acc[2] += buf[i + 2] * kv;
+                }
+                row[x * 3..x * 3 + 3].copy_from_slice(&acc);
+            }
+        });
+        buf.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+            for x in 0..w {
+                let mut acc = [0.0f32; 3];
+                for (t, kv) in k.iter().enumerate() {
+                    let yy = (y as i64 + t as i64 - r).clamp(0, h as i64 - 1) as usize;
+                    let i = (yy * w + x) * 3;
+                    acc[0] += tmp[i] * kv;
+                    acc[1] += tmp[i + 1] * kv;
+                    acc[2] += tmp[i + 2] * kv;
+                }
+                row[x * 3..x * 3 + 3].copy_from_slice(&acc);
+            }
+        });
+    }
+    let seed: u64 = rng.random();
+    img.par_chunks_mut(w * 3)
+        .zip(buf.par_chunks(w * 3))
+        .enumerate()
+        .for_each(|(y, (dst, src))| {
+            let mut r = rng_for(seed, &[y as u64]);
+            for (px, sp) in dst.chunks_exact_mut(3).zip(src.chunks_exact(3)) {
+                let n = if noise > 0.0 {
+                    (r.normal() * noise) as f32
+                } else {
+                    0.0
+                };
+                for (d, s) in px.iter_mut().zip(sp) {
+                    *d = (s + n).round().clamp(0.0, 255.0) as u8;
+                }
+            }
+        });
+}
+
+/// A pair of road points with their metric distance, BCS style.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct DistanceMeasurement {
+    pub p1: [f64; 3],
+    pub p2: [f64; 3],
+    pub distance: f64,
+    #[serde(rename = "toVP1")]
+    pub to_vp1: bool,
+}
+
+/// Road point pairs (along and across the main road) seen in the image, with exact distances.
+pub fn distance_measurements(state: &SceneState, count: usize) -> Vec<DistanceMeasurement> {
+    let cam = &state.camera;
+    let mut rng = rng_for(state.spec.seed, &[0xD15]);
+    let (w, h) = (f64::from(cam.width), f64::from(cam.height));
+    let hz = cam.horizon();
+    let margin = 0.04 * w.min(h);
+    let inside =
+        |p: [f64; 2]| p[0] > margin && p[1] > margin && p[0] < w - margin && p[1] < h - margin;
+    let main = state.world.main_heading;
+    let mut out = Vec::new();
+    let mut along = 0;
+    let mut across = 0;
+    for _ in 0..4000 {
+        if out.len() >= count {
+            break;
+        }
+        let u = rng.uni(margin, w - margin);
+        let v = rng.uni(margin, h - margin);
+        // Stay clearly below the horizon so that distances are well conditioned.
+        if hz[0] * u + hz[1] * v + hz[2] < 0.12 * h {
+            continue;
+        }
+        let Some(g) = cam.ground_point(u, v) else {
+            continue;
+        };
+        if (g - cam.position).norm() > 250.0 {
+            continue;
+        }
+        let want_along = along <= across;
+        let (heading, lo, hi) = match &state.world.ground {
+            Ground::Road(road) => {
+                let (s, _) = road.local(g.x, g.y);
+                (road.pose(s, 0.0).heading, 5.0, 30.0)
+            }
+            _ => (main, 3.0, 20.0),
+        };
+        let dir = if want_along {
+            heading
+        } else {
+            heading + FRAC_PI_2
+        };
+        let len = rng.uni(lo, hi) * if rng.chance(0.5) { 1.0 } else { -1.0 };
+        let g2 = match &state.world.ground {
+            Ground::Road(road) if want_along => {
+                // Follow the road (curves too); the distance is the straight chord.
+                let (s, t) = road.local(g.x, g.y);
+                let p = road.pose(s + len, t);
+                V3::new(p.x, p.y, 0.0)
+            }
+            _ => g + V3::new(dir.cos(), dir.sin(), 0.0) * len,
+        };
+        let (Some(p1), Some(p2)) = (cam.project(g), cam.project(g2)) else {
+            continue;
+        };
+        if !inside(p1) || !inside(p2) || hz[0] * p2[0] + hz[1] * p2[1] + hz[2] < 0.12 * h {
+            continue;
+        }
+        // Pixel length at least 40 px so the pair is measurable.
+        if ((p1[0] - p2[0]).powi(2) + (p1[1] - p2[1]).powi(2)).sqrt() < 40.0 {
+            continue;
+        }
+        out.push(DistanceMeasurement {
+            p1: [p1[0], p1[1], 1.0],
+            p2: [p2[0], p2[1], 1.0],
+            distance: (g - g2).norm(),
+            to_vp1: want_along,
+        });
+        if want_along {
+            along += 1;
+        } else {
+            across += 1;
+        }
+    }
+    out
+}
+
+/// Options for writing a scene.
+#[derive(Debug, Clone, Copy)]
+pub struct WriteOptions {
+    pub video: bool,
+    pub frames_dir: bool,
+}
+
+/// Summary of a written scene.
+#[derive(Debug, Clone)]
+pub struct SceneSummary {
+    pub name: String,
+    pub frames: u32,
+    pub render_s: f64,
+    pub total_s: f64,
+    pub detections: usize,
+    pub focal_px: f64,
+}
+
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SynthError> {
+    let tmp = PathBuf::from(format!("{}.tmp", path.display()));
+    std::fs::write(&tmp, bytes).map_err(|e| SynthError::io(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| SynthError::io(path, e))
+}
+
+fn json_bytes<T: serde::Serialize>(v: &T, path: &Path) -> Result<Vec<u8>, SynthError> {
+    serde_json::to_vec_pretty(v).map_err(|e| SynthError::Format {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+fn save_png(img: &image::RgbImage, path: &Path) -> Result<(), SynthError> {
+    let tmp = PathBuf::from(format!("{}.tmp.png", path.display()));
+    img.save(&tmp).map_err(|e| SynthError::Image {
+        path: tmp.clone(),
+        source: e,
+    })?;
+    std::fs::rename(&tmp, path).map_err(|e| SynthError::io(path, e))
+}
+
+/// An ffmpeg subprocess encoding raw RGB frames to H.264.
+struct VideoWriter {
+    child: std::process::Child,
+    tmp: PathBuf,
+    path: PathBuf,
+}
+
+impl VideoWriter {
+    fn start(path: &Path, w: u32, h: u32, fps: f64) -> Result<VideoWriter, SynthError> {
+        let tmp = PathBuf::from(format!("{}.tmp.mp4", path.display()));
+        let child = Command::new("ffmpeg")
+            .args([
+                "-loglevel",
+                "error",
+                "-y",
+                "-f",
+                "rawvideo",
+                "-pix_fmt",
+                "rgb24",
+                "-s",
+            ])
+            .arg(format!("{w}x{h}"))
+            .arg("-r")
+            .arg(format!("{fps}"))
+            .args([
+                "-i",
+                "-",
+                "-c:v",
+                "libx264",
+                "-preset",
+                "veryfast",
+                "-crf",
+                "20",
+                "-pix_fmt",
+                "yuv420p",
+                "-fps_mode",
+                "passthrough",
+            ])
+            .arg(&tmp)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|e| SynthError::Ffmpeg {
+                path: path.to_path_buf(),
+                message: format!("cannot start `ffmpeg` ({e}); is it installed and on PATH?"),
+            })?;
+        Ok(VideoWriter {
+            child,
+            tmp,
+            path: path.to_path_buf(),
+        })
+    }
+
+    fn push(&mut self, img: &image::RgbImage) -> Result<(), SynthError> {
+        let stdin = self
+            .child
+            .stdin
+            .as_mut()
+            .ok_or_else(|| SynthError::Ffmpeg {
+                path: self.path.clone(),
+                message: "stdin closed".into(),
+            })?;
+        stdin
+            .write_all(img.as_raw())
+            .map_err(|e| SynthError::Ffmpeg {
+                path: self.path.clone(),
+                message: format!("writing a frame: {e}"),
+            })
+    }
+
+    fn finish(mut self) -> Result<(), SynthError> {
+        drop(self.child.stdin.take());
+        let out = self
+            .child
+            .wait_with_output()
+            .map_err(|e| SynthError::Ffmpeg {
+                path: self.path.clone(),
+                message: e.to_string(),
+            })?;
+        if !out.status.success() {
+            return Err(SynthError::Ffmpeg {
+                path: self.path.clone(),
+                message: format!(
+                    "exit {}: {}",
+                    out.status,
+                    String::from_utf8_lossy(&out.stderr).trim()
+                ),
+            });
+        }
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| SynthError::io(&self.path, e))
+    }
+}
+
+/// Render and write a whole scene under `out` (see the module docs for the layout).
+/// `progress` gets the number of frames done.
+///
+/// # Errors
+/// Invalid specs, I/O and ffmpeg failures, naming the file.
+pub fn render_scene(
+    spec: &SceneSpec,
+    out: &Path,
+    opts: WriteOptions,
+    progress: &dyn Fn(u32),
+) -> Result<SceneSummary, SynthError> {
+    let t_start = std::time::Instant::now();
+    let ds = out.join("dataset").join(&spec.name);
+    let res = out.join("results").join(&spec.name);
+    for d in [&ds, &res] {
+        std::fs::create_dir_all(d).map_err(|e| SynthError::io(d, e))?;
+    }
+    let frames_dir = ds.join("frames");
+    if opts.frames_dir {
+        std::fs::create_dir_all(&frames_dir).map_err(|e| SynthError::io(&frames_dir, e))?;
+    }
+    let mut renderer = SceneRenderer::new(spec)?;
+    let st = &renderer.state;
+    let cam = st.camera.clone();
+    let Some((vp1, vp2)) = st.main_vps() else {
+        return Err(SynthError::Exhausted {
+            what: "finite main-road vanishing points".into(),
+            attempts: 1,
+        });
+    };
+    let scale = cam
+        .bcs_scale(vp1, vp2)
+        .ok_or_else(|| SynthError::Exhausted {
+            what: "a BCS scale".into(),
+            attempts: 1,
+        })?;
+    let measurements = distance_measurements(st, 40);
+    // Ground-truth files first (small).
+    let gt = serde_json::json!({
+        "fps": spec.fps,
+        "distanceMeasurement": measurements,
+        "measurementLines": [],
+        "laneDivLines": [],
+        "invalidLanes": [],
+        "cars": [],
+    });
+    let p = ds.join("gt_data.json");
+    write_atomic(&p, &json_bytes(&gt, &p)?)?;
+    let sys = serde_json::json!({
+        "camera_calibration": {"vp1": vp1, "vp2": vp2, "pp": cam.pp, "scale": scale},
+        "cars": [],
+    });
+    let p = res.join("system_groundtruth.json");
+    write_atomic(&p, &json_bytes(&sys, &p)?)?;
+    let (yaw, pitch, roll) = cam.angles();
+    let camera_json = serde_json::json!({
+        "scene": spec.name,
+        "layout": spec.layout.name(),
+        "seed": spec.seed,
+        "width": cam.width,
+        "height": cam.height,
+        "fps": spec.fps,
+        "frames": spec.frames,
+        "focal_px": cam.focal_px,
+        "pp": cam.pp,
+        "K": cam.k(),
+        "R": cam.rotation,
+        "R_convention": "camera-from-world: X_cam = R (X_world - C); world z up, road z = 0; camera x right, y down, z forward",
+        "position_m": cam.position.to_array(),
+        "height_m": cam.height_m(),
+        "yaw_deg": yaw.to_degrees(),
+        "pitch_deg": pitch.to_degrees(),
+        "roll_deg": roll.to_degrees(),
+        "main_heading_deg": st.world.main_heading.to_degrees(),
+        "vp1": vp1,
+        "vp2": vp2,
+        "vp3": cam.vp3(),
+        "horizon": cam.horizon(),
+        "bcs_scale": scale,
+        "pixel_convention": "pixel (i, j) covers [i, i+1) x [j, j+1); pp is the image centre",
+        "spec": spec,
+    });
+    let p = ds.join("camera.json");
+    write_atomic(&p, &json_bytes(&camera_json, &p)?)?;
+
+    let mut video = if opts.video {
+        Some(VideoWriter::start(
+            &ds.join("video.mp4"),
+            cam.width,
+            cam.height,
+            spec.fps,
+        )?)
+    } else {
+        None
+    };
+    let mut dets = String::from("frame,x0,y0,x1,y1,score\n");
+    let mut jsonl = String::new();
+    let mut n_det = 0usize;
+    let mut render_s = 0.0;
+    for k in 0..spec.frames {
+        let t0 = std::time::Instant::now();
+        let frame = renderer.next_frame();
+        render_s += t0.elapsed().as_secs_f64();
+        if k == 0 {
+            save_png(&frame.image, &ds.join("screen.png"))?;
+            let overlay = crate::sheet::overlay_frame(&frame.image, &cam, &frame.vehicles);
+            save_png(&overlay, &ds.join("overlay.png"))?;
+        }
+        if opts.frames_dir {
+            save_png(&frame.image, &frames_dir.join(format!("{k:06}.png")))?;
+        }
+        if let Some(v) = video.as_mut() {
+            v.push(&frame.image)?;
+        }
+        for v in &frame.vehicles {
+            let b = v.box_clipped;
+            let full = (v.box2d[2] - v.box2d[0]) * (v.box2d[3] - v.box2d[1]);
+            let inside = (b[2] - b[0]) * (b[3] - b[1]) / full.max(1e-9);
+            if v.visible_fraction >= 0.3
+                && inside >= 0.6
+                && (b[2] - b[0]) >= 8.0
+                && (b[3] - b[1]) >= 8.0
+            {
+                dets.push_str(&format!(
+                    "{k},{:.2},{:.2},{:.2},{:.2},1.0\n",
+                    b[0], b[1], b[2], b[3]
+                ));
+                n_det += 1;
+            }
+            let line = serde_json::to_string(v).map_err(|e| SynthError::Format {
+                path: ds.join("vehicles.jsonl"),
+                message: e.to_string(),
+            })?;
+            jsonl.push_str(&line);
+            jsonl.push('\n');
+        }
+        progress(k + 1);
+    }
+    if let Some(v) = video {
+        v.finish()?;
+    }
+    write_atomic(&ds.join("detections.csv"), dets.as_bytes())?;
+    write_atomic(&ds.join("vehicles.jsonl"), jsonl.as_bytes())?;
+    Ok(SceneSummary {
+        name: spec.name.clone(),
+        frames: spec.frames,
+        render_s,
+        total_s: t_start.elapsed().as_secs_f64(),
+        detections: n_det,
+        focal_px: cam.focal_px,
+    })
+}

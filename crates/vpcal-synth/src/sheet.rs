@@ -1,0 +1,205 @@
+//! Pictures to check the ground truth by eye: a contact sheet of crops with their 3D boxes and
+//! VP directions, and a frame with the true horizon, VPs and boxes.
+//!
+//! Colours: VP1 (heading) red, VP2 (sideways) green, vertical edges blue, horizon yellow.
+
+use image::{Rgb, RgbImage};
+
+use crate::camera::Camera;
+use crate::scene::VehicleTruth;
+
+pub const RED: Rgb<u8> = Rgb([255, 40, 40]);
+pub const GREEN: Rgb<u8> = Rgb([40, 230, 60]);
+pub const BLUE: Rgb<u8> = Rgb([60, 140, 255]);
+pub const YELLOW: Rgb<u8> = Rgb([255, 220, 0]);
+
+/// Box edges along VP1, VP2 and vertical, for the crate's corner order.
+pub const EDGES_VP1: [(usize, usize); 4] = [(0, 3), (1, 2), (4, 7), (5, 6)];
+pub const EDGES_VP2: [(usize, usize); 4] = [(0, 1), (3, 2), (4, 5), (7, 6)];
+pub const EDGES_VERT: [(usize, usize); 4] = [(0, 4), (1, 5), (2, 6), (3, 7)];
+
+/// Clip segment p-q to the rectangle [0, w] x [0, h] (Liang-Barsky).
+fn clip(p: [f64; 2], q: [f64; 2], w: f64, h: f64) -> Option<([f64; 2], [f64; 2])> {
+    let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
+    let mut t0 = 0.0f64;
+    let mut t1 = 1.0f64;
+    for (pk, qk) in [(-dx, p[0]), (dx, w - p[0]), (-dy, p[1]), (dy, h - p[1])] {
+        if pk == 0.0 {
+            if qk < 0.0 {
+                return None;
+            }
+        } else {
+            let r = qk / pk;
+            if pk < 0.0 {
+                t0 = t0.max(r);
+            } else {
+                t1 = t1.min(r);
+            }
+        }
+    }
+    if t0 > t1 {
+        return None;
+    }
+    Some((
+        [p[0] + t0 * dx, p[1] + t0 * dy],
+        [p[0] + t1 * dx, p[1] + t1 * dy],
+    ))
+}
+
+/// Anti-aliased line of the given width (pixels), clipped to the image.
+pub fn draw_line(img: &mut RgbImage, p: [f64; 2], q: [f64; 2], c: Rgb<u8>, width: f64) {
+    let (w, h) = (f64::from(img.width()), f64::from(img.height()));
+    if !(p.iter().chain(&q).all(|v| v.is_finite())) {
+        return;
+    }
+    let Some((a, b)) = clip(p, q, w, h) else {
+        return;
+    };
+    let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+    let steps = (len * 2.0).ceil().max(1.0) as usize;
+    let r = width / 2.0;
+    let ri = (r + 1.0).ceil() as i64;
+    let mut last: Option<(i64, i64)> = None;
+    for k in 0..=steps {
+        let t = k as f64 / steps as f64;
+        let x = a[0] + (b[0] - a[0]) * t;
+        let y = a[1] + (b[1] - a[1]) * t;
+        let cell = (x.floor() as i64, y.floor() as i64);
+        if last == Some(cell) {
+            continue;
+        }
+        last = Some(cell);
+        for dy in -ri..=ri {
+            for dx in -ri..=ri {
+                let px = cell.0 + dx;
+                let py = cell.1 + dy;
+                if px < 0 || py < 0 || px >= img.width() as i64 || py >= img.height() as i64 {
+                    continue;
+                }
+                // Distance from the pixel centre to the segment.
+                let (cx, cy) = (px as f64 + 0.5, py as f64 + 0.5);
+                let d = seg_dist([cx, cy], a, b);
+                let cov = (r + 0.5 - d).clamp(0.0, 1.0) as f32;
+                if cov <= 0.0 {
+                    continue;
+                }
+                let o = img.get_pixel_mut(px as u32, py as u32);
+                for ch in 0..3 {
+                    let v = f32::from(o[ch]) * (1.0 - cov) + f32::from(c[ch]) * cov;
+                    o[ch] = v.round() as u8;
+                }
+            }
+        }
+    }
+}
+
+fn seg_dist(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
+    let l2 = abx * abx + aby * aby;
+    let t = if l2 > 0.0 {
+        (((p[0] - a[0]) * abx + (p[1] - a[1]) * aby) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let (x, y) = (a[0] + t * abx, a[1] + t * aby);
+    ((p[0] - x).powi(2) + (p[1] - y).powi(2)).sqrt()
+}
+
+/// Small circle (ring) at p.
+pub fn draw_ring(img: &mut RgbImage, p: [f64; 2], radius: f64, c: Rgb<u8>) {
+    let n = 24;
+    for k in 0..n {
+        let a0 = std::f64::consts::TAU * k as f64 / n as f64;
+        let a1 = std::f64::consts::TAU * (k + 1) as f64 / n as f64;
+        draw_line(
+            img,
+            [p[0] + radius * a0.cos(), p[1] + radius * a0.sin()],
+            [p[0] + radius * a1.cos(), p[1] + radius * a1.sin()],
+            c,
+            1.5,
+        );
+    }
+}
+
+/// Draw a 3D box, the rays from its VP1/VP2 edges towards the VPs, and VP markers.
+pub fn draw_truth(
+    img: &mut RgbImage,
+    bb3d: &[[f64; 2]; 8],
+    vp1: Option<[f64; 2]>,
+    vp2: Option<[f64; 2]>,
+    width: f64,
+) {
+    // Rays from the box's far corners to the VPs: they must run along the box edges.
+    for (vp, edges, col) in [(vp1, EDGES_VP1, RED), (vp2, EDGES_VP2, GREEN)] {
+        let Some(vp) = vp else { continue };
+        let faint = Rgb([col[0] / 2 + 60, col[1] / 2 + 60, col[2] / 2 + 60]);
+        for (a, b) in edges {
+            // From the corner farther from the VP, through the nearer, to the VP.
+            let da = (bb3d[a][0] - vp[0]).hypot(bb3d[a][1] - vp[1]);
+            let db = (bb3d[b][0] - vp[0]).hypot(bb3d[b][1] - vp[1]);
+            let near = if da < db { bb3d[a] } else { bb3d[b] };
+            draw_line(img, near, vp, faint, width * 0.5);
+        }
+    }
+    for (edges, col) in [(EDGES_VP1, RED), (EDGES_VP2, GREEN), (EDGES_VERT, BLUE)] {
+        for (a, b) in edges {
+            draw_line(img, bb3d[a], bb3d[b], col, width);
+        }
+    }
+    for (vp, col) in [(vp1, RED), (vp2, GREEN)] {
+        if let Some(v) = vp {
+            draw_ring(img, v, 5.0 * width, col);
+        }
+    }
+}
+
+/// A frame with the true horizon, every vehicle's 3D box and VP rays.
+pub fn overlay_frame(frame: &RgbImage, cam: &Camera, vehicles: &[VehicleTruth]) -> RgbImage {
+    let mut img = frame.clone();
+    let (w, h) = (f64::from(img.width()), f64::from(img.height()));
+    let hz = cam.horizon();
+    // Horizon: a x + b y + c = 0, drawn across a wide range (it may lie above the image).
+    if hz[1].abs() > 1e-9 {
+        let y = |x: f64| -(hz[0] * x + hz[2]) / hz[1];
+        draw_line(
+            &mut img,
+            [-10.0 * w, y(-10.0 * w)],
+            [11.0 * w, y(11.0 * w)],
+            YELLOW,
+            3.0,
+        );
+    } else if hz[0].abs() > 1e-9 {
+        let x = -hz[2] / hz[0];
+        draw_line(&mut img, [x, -h], [x, 2.0 * h], YELLOW, 3.0);
+    }
+    let lw = (w / 900.0).max(1.0);
+    for v in vehicles.iter().filter(|v| v.visible_fraction > 0.2) {
+        draw_truth(&mut img, &v.bb3d, v.vp1, v.vp2, lw);
+    }
+    img
+}
+
+/// A contact sheet: crops (with their truth drawn) in a grid of `cell` x `cell` tiles.
+pub fn contact_sheet(samples: &[vpcal_data::Sample], cols: usize, cell: u32) -> RgbImage {
+    let cols = cols.max(1);
+    let rows = samples.len().div_ceil(cols).max(1);
+    let mut sheet = RgbImage::from_pixel(cols as u32 * cell, rows as u32 * cell, Rgb([30, 30, 30]));
+    for (k, s) in samples.iter().enumerate() {
+        let (cw, ch) = (s.image.width().max(1), s.image.height().max(1));
+        let sc = (f64::from(cell - 4) / f64::from(cw)).min(f64::from(cell - 4) / f64::from(ch));
+        let (nw, nh) = (
+            ((f64::from(cw) * sc).round() as u32).max(1),
+            ((f64::from(ch) * sc).round() as u32).max(1),
+        );
+        let mut tile =
+            image::imageops::resize(&s.image, nw, nh, image::imageops::FilterType::Triangle);
+        let m = |p: [f64; 2]| [p[0] * sc, p[1] * sc];
+        let bb = s.bb3d.map(m);
+        // Draw in a padded canvas so VP rays show their direction beyond the crop.
+        draw_truth(&mut tile, &bb, Some(m(s.vp1)), Some(m(s.vp2)), 1.2);
+        let x = (k % cols) as u32 * cell + (cell - nw) / 2;
+        let y = (k / cols) as u32 * cell + (cell - nh) / 2;
+        image::imageops::replace(&mut sheet, &tile, i64::from(x), i64::from(y));
+    }
+    sheet
+}
