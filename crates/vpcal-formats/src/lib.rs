@@ -1,5 +1,20 @@
-//! File formats for vpcal.
+//! File formats for vpcal. Every reader names the file (and the item and field) in its errors;
+//! every writer writes atomically (temporary file, then rename).
 //!
+//! - [`json`]: JSON with Python's `Infinity`/`NaN` tokens, read and written without loss.
 //! - [`pickle`]: a safe Python-pickle reader (no code execution; numpy arrays and scalars).
+//! - [`bcs`]: BrnoCompSpeed ground truth (`gt_data.pkl` / `gt_data.json`) and system files.
+//! - [`bcp`]: BrnoCarPark ground truth (`gt_pairs.json`).
+//! - [`reference`]: the reference implementation's `VPout_*.json` and `detections.json`.
+//! - [`fs`]: atomic writes and JSON file helpers.
 
+pub mod bcp;
+pub mod bcs;
+mod error;
+pub mod fs;
+pub mod json;
 pub mod pickle;
+pub mod pickle_json;
+pub mod reference;
+
+pub use error::FormatError;

@@ -22,12 +22,16 @@ enum Command {
     /// Training data: preview the augmentation, benchmark the batch pipeline.
     #[command(subcommand)]
     Data(cmd::data::DataCommand),
+    /// Synthetic data: training crops, traffic scenes with ground truth, benchmark suite.
+    #[command(subcommand)]
+    Synth(cmd::synth::SynthCommand),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Data(args) => cmd::data::run(args),
+        Command::Synth(args) => cmd::synth::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

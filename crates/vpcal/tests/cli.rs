@@ -1,0 +1,403 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! End-to-end tests of the `vpcal` binary. Tests that need the real data in
+//! `VPCAL_DATA` (default `../shared/data` beside the repository) skip with a message when it
+//! is absent.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn vpcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vpcal"))
+        .args(args)
+        .output()
+        .expect("run vpcal")
+}
+
+fn data_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("VPCAL_DATA").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
+        PathBuf::from,
+    );
+    if dir.join("bcs").is_dir() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "skipping: real data not found at {} (set VPCAL_DATA)",
+            dir.display()
+        );
+        None
+    }
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Expected per-video ratio errors of the published DubskaCalib results on sessions 0-3,
+/// computed independently by
+/// `python3 scripts/bcs_ratio_errors.py ../shared/data/bcs/dataset ../shared/data/bcs/results dubska_bmvc14`
+/// (numpy implementation of the official protocol): (video, pairs, mean, median, p95, max).
+const DUBSKA_EXPECTED: [(&str, usize, f64, f64, f64, f64); 12] = [
+    (
+        "session0_center",
+        45,
+        25.578708759659513,
+        23.330679468041325,
+        55.7346361377396,
+        67.31868053834775,
+    ),
+    (
+        "session0_left",
+        91,
+        6.498131795060341,
+        5.93316128303627,
+        13.959124358192454,
+        15.206736884485839,
+    ),
+    (
+        "session0_right",
+        45,
+        17.767732272173443,
+        28.392725568986233,
+        33.396308378268934,
+        34.179757857212465,
+    ),
+    (
+        "session1_center",
+        6,
+        45.35683519465132,
+        51.37597412580515,
+        77.4263458256607,
+        78.04513429809727,
+    ),
+    (
+        "session1_left",
+        6,
+        17.63050158432823,
+        19.776947717728316,
+        27.89853939535649,
+        28.031904353708075,
+    ),
+    (
+        "session1_right",
+        6,
+        10.474372533464178,
+        9.156464381771755,
+        22.074021529288924,
+        22.228967688636946,
+    ),
+    (
+        "session2_center",
+        21,
+        8.7380065842342,
+        5.937182315311492,
+        18.172677109766163,
+        22.453633236134117,
+    ),
+    (
+        "session2_left",
+        21,
+        29.943264481250118,
+        5.7725553763910735,
+        63.139961863839645,
+        65.38262428303483,
+    ),
+    (
+        "session2_right",
+        21,
+        2.99965398972928,
+        1.7358008328079328,
+        6.298045833391727,
+        6.398271223442756,
+    ),
+    (
+        "session3_center",
+        45,
+        8.982254693362819,
+        3.2440372497533967,
+        23.572605870110173,
+        24.242358502384196,
+    ),
+    (
+        "session3_left",
+        45,
+        10.633741736704332,
+        4.076871634302105,
+        31.06282276947204,
+        31.645698872172535,
+    ),
+    (
+        "session3_right",
+        45,
+        17.81825286164303,
+        5.004129521417136,
+        50.11666392671646,
+        53.24930048192636,
+    ),
+];
+
+#[test]
+fn eval_bcs_reproduces_the_official_protocol_on_dubska() {
+    let Some(data) = data_dir() else { return };
+    let dataset = data.join("bcs/dataset");
+    let results = data.join("bcs/results");
+    let out = vpcal(&[
+        "eval",
+        "bcs",
+        "--dataset",
+        dataset.to_str().unwrap(),
+        "--results",
+        results.to_str().unwrap(),
+        "--system",
+        "dubska_bmvc14",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    let videos = json[0]["videos"].as_array().unwrap();
+    assert_eq!(videos.len(), 12);
+    for (v, (name, pairs, mean, median, p95, max)) in videos.iter().zip(DUBSKA_EXPECTED) {
+        assert_eq!(v["video"], name);
+        let r = &v["ratio"];
+        assert_eq!(r["n"].as_u64().unwrap() as usize, pairs, "{name}");
+        for (key, want) in [
+            ("mean", mean),
+            ("median", median),
+            ("p95", p95),
+            ("max", max),
+        ] {
+            let got = r[key].as_f64().unwrap();
+            assert!((got - want).abs() < 1e-3, "{name} {key}: {got} vs {want}");
+        }
+    }
+    // Pooled over all 397 pairs.
+    assert_eq!(json[0]["pooled_ratio"]["n"], 397);
+
+    // The human-readable table has the same numbers.
+    let out = vpcal(&[
+        "eval",
+        "bcs",
+        "--dataset",
+        dataset.to_str().unwrap(),
+        "--results",
+        results.to_str().unwrap(),
+        "--system",
+        "dubska_bmvc14",
+    ]);
+    assert!(out.status.success());
+    let table = stdout(&out);
+    assert!(
+        table.contains("session0_left          91    6.498    5.933"),
+        "{table}"
+    );
+    assert!(
+        table.contains("session2_right         21    3.000    1.736"),
+        "{table}"
+    );
+}
+
+#[test]
+fn eval_bcs_split_selects_sessions() {
+    let Some(data) = data_dir() else { return };
+    let out = vpcal(&[
+        "eval",
+        "bcs",
+        "--dataset",
+        data.join("bcs/dataset").to_str().unwrap(),
+        "--results",
+        data.join("bcs/results").to_str().unwrap(),
+        "--split",
+        "B",
+        "--system",
+        "dubska_bmvc14",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    // Split B is sessions 3-6; only session 3 is in the data at hand.
+    let names: Vec<&str> = json[0]["videos"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v["video"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        ["session3_center", "session3_left", "session3_right"]
+    );
+}
+
+#[test]
+fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
+    let Some(data) = data_dir() else { return };
+    let dir = data.join("bcs/vp_outputs/session4_center");
+    let vpout = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "json"))
+        .unwrap();
+    let published_dir = data.join("bcs/results/session4_center");
+    let published = std::fs::read_dir(&published_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().contains("VPout"))
+        .unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let out_path = tmp.path().join("system.json");
+    let out = vpcal(&[
+        "aggregate",
+        vpout.to_str().unwrap(),
+        "--pp",
+        "960.5,540.5",
+        "-o",
+        out_path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let ours: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out_path).unwrap()).unwrap();
+    let theirs: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&published).unwrap()).unwrap();
+    for key in ["vp1", "vp2", "pp"] {
+        for k in 0..2 {
+            let a = ours["camera_calibration"][key][k].as_f64().unwrap();
+            let b = theirs["camera_calibration"][key][k].as_f64().unwrap();
+            assert!((a - b).abs() < 1e-6, "{key}[{k}]: {a} vs {b}");
+        }
+    }
+    assert_eq!(ours["camera_calibration"]["scale"], 1.0);
+}
+
+#[test]
+fn bad_input_fails_with_one_line_naming_the_file_and_writes_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out_path = tmp.path().join("system.json");
+    // Missing file.
+    let missing = tmp.path().join("nope.json");
+    let out = vpcal(&[
+        "aggregate",
+        missing.to_str().unwrap(),
+        "-o",
+        out_path.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(err.contains("nope.json"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!out_path.exists());
+    // Malformed item: the error names the item and the field.
+    let bad = tmp.path().join("bad.json");
+    std::fs::write(
+        &bad,
+        r#"[{"vp1": [1, 2], "vp2": [3, "x"], "score": 0.5, "frame_cnt": 1}]"#,
+    )
+    .unwrap();
+    let out = vpcal(&[
+        "aggregate",
+        bad.to_str().unwrap(),
+        "-o",
+        out_path.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("bad.json") && err.contains("item [0].vp2[1]"),
+        "{err}"
+    );
+    assert!(!out_path.exists());
+    // No usable vehicle: a clear "not enough evidence" error.
+    std::fs::write(
+        &bad,
+        r#"[{"vp1": [1, 2], "vp2": [3, 4], "score": 0.05, "frame_cnt": 1}]"#,
+    )
+    .unwrap();
+    let out = vpcal(&[
+        "aggregate",
+        bad.to_str().unwrap(),
+        "-o",
+        out_path.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("not enough evidence"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!out_path.exists());
+    // A bad flag value is clap's error (exit code 2).
+    let out = vpcal(&["aggregate", "x.json", "--pp", "1,2,3", "-o", "y.json"]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn eval_bcp_scores_a_synthetic_car_park() {
+    // A camera built from known VPs; the ground truth is made with it, so its ratio error is 0
+    // and the optimal-scale distance error is 0; a camera with another focal length is worse.
+    let tmp = tempfile::tempdir().unwrap();
+    let gt_dir = tmp.path().join("ground_truth/S01");
+    let res_dir = tmp.path().join("results/S01");
+    std::fs::create_dir_all(&gt_dir).unwrap();
+    std::fs::create_dir_all(&res_dir).unwrap();
+    let (pp, vp1, vp2) = ([640.5, 400.5], [900.0, -300.0], [-5738.5, -249.5]);
+    let calib =
+        vpcal_geom::camera::Calibration::from_vps(vp1.into(), vp2.into(), pp.into()).unwrap();
+    let pixels = [
+        ([300.0, 700.0], [500.0, 650.0]),
+        ([800.0, 500.0], [900.0, 600.0]),
+        ([200.0, 450.0], [1000.0, 700.0]),
+        ([640.0, 420.0], [700.0, 780.0]),
+    ];
+    let scale = 0.37;
+    let pairs: Vec<String> = pixels
+        .iter()
+        .map(|(a, b)| {
+            let d = scale * calib.road_distance((*a).into(), (*b).into()).unwrap();
+            format!(
+                r#"{{"p1": [{}, {}], "p2": [{}, {}], "distance": {d}}}"#,
+                a[0], a[1], b[0], b[1]
+            )
+        })
+        .collect();
+    std::fs::write(
+        gt_dir.join("gt_pairs.json"),
+        format!("[{}]", pairs.join(", ")),
+    )
+    .unwrap();
+    let system = |vp2: [f64; 2]| {
+        format!(
+            r#"{{"cars": [], "camera_calibration": {{"pp": [{}, {}], "scale": 1.0, "vp1": [{}, {}], "vp2": [{}, {}]}}}}"#,
+            pp[0], pp[1], vp1[0], vp1[1], vp2[0], vp2[1]
+        )
+    };
+    std::fs::write(res_dir.join("system_true.json"), system(vp2)).unwrap();
+    std::fs::write(res_dir.join("system_off.json"), system([-4500.0, -260.0])).unwrap();
+    let out = vpcal(&[
+        "eval",
+        "bcp",
+        "--ground-truth",
+        tmp.path().join("ground_truth").to_str().unwrap(),
+        "--results",
+        tmp.path().join("results").to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    let by_name = |n: &str| {
+        json.as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["system"] == n)
+            .unwrap()
+            .clone()
+    };
+    let truth = by_name("true");
+    assert!(truth["pooled_ratio"]["max"].as_f64().unwrap() < 1e-9);
+    assert!(truth["pooled_distance"]["max"].as_f64().unwrap() < 1e-9);
+    let s = truth["videos"][0]["scale"].as_f64().unwrap();
+    assert!((s - scale).abs() < 1e-9, "{s}");
+    let off = by_name("off");
+    assert!(off["pooled_ratio"]["mean"].as_f64().unwrap() > 1.0);
+}
