@@ -123,6 +123,38 @@ impl Mesh {
         }
     }
 
+    /// A loft whose band materials depend on the segment (pair of sections) and the band (pair
+    /// of polygon points): `mat(segment, band)`, `None` leaves the face out.
+    pub fn loft_with(
+        &mut self,
+        sections: &[(f64, Vec<(f64, f64)>)],
+        mat: &dyn Fn(usize, usize) -> Option<Material>,
+        cap: Option<Material>,
+    ) {
+        for (seg, w) in sections.windows(2).enumerate() {
+            let (x0, ref a) = w[0];
+            let (x1, ref b) = w[1];
+            let n = a.len().min(b.len());
+            for k in 0..n {
+                let Some(m) = mat(seg, k) else { continue };
+                let k2 = (k + 1) % n;
+                self.quad(
+                    V3::new(x0, a[k].0, a[k].1),
+                    V3::new(x1, b[k].0, b[k].1),
+                    V3::new(x1, b[k2].0, b[k2].1),
+                    V3::new(x0, a[k2].0, a[k2].1),
+                    m,
+                );
+            }
+        }
+        if let Some(cap) = cap {
+            for (x, pts) in [sections.first(), sections.last()].into_iter().flatten() {
+                let p: Vec<V3> = pts.iter().map(|&(y, z)| V3::new(*x, y, z)).collect();
+                self.poly(&p, cap);
+            }
+        }
+    }
+
     /// Cylinder with its axis along y, from y0 to y1, centre (x, z); caps at both ends. A
     /// vertex sits exactly at the bottom (z - r), so a wheel touches the road.
     #[allow(clippy::too_many_arguments)]

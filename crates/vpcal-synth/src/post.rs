@@ -111,41 +111,52 @@ pub fn apply<R: Rng>(img: &mut RgbImage, fx: &Effects, rng: &mut R) {
     }
 }
 
-/// Separable Gaussian blur of an interleaved RGB float buffer.
+/// Separable Gaussian blur of an interleaved RGB float buffer (edges clamped).
 pub fn gaussian_blur(buf: &mut [f32], w: usize, h: usize, sigma: f32) {
-    let r = (sigma * 3.0).ceil().max(1.0) as i64;
-    let k: Vec<f32> = (-r..=r)
-        .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
+    let r = (sigma * 3.0).ceil().max(1.0) as usize;
+    let k: Vec<f32> = (0..=2 * r)
+        .map(|i| {
+            let d = i as f32 - r as f32;
+            (-(d * d) / (2.0 * sigma * sigma)).exp()
+        })
         .collect();
     let ks: f32 = k.iter().sum();
     let k: Vec<f32> = k.iter().map(|v| v / ks).collect();
     let mut tmp = vec![0.0f32; buf.len()];
+    // Horizontal: a padded copy of each row, then a straight convolution.
+    let mut padded = vec![0.0f32; (w + 2 * r) * 3];
+    for (src, dst) in buf.chunks_exact(w * 3).zip(tmp.chunks_exact_mut(w * 3)) {
+        blur_row(src, dst, &k, r, &mut padded);
+    }
+    // Vertical: accumulate whole rows.
     for y in 0..h {
-        for x in 0..w {
-            let mut acc = [0.0f32; 3];
-            for (t, kv) in k.iter().enumerate() {
-                let xx = (x as i64 + t as i64 - r).clamp(0, w as i64 - 1) as usize;
-                let i = (y * w + xx) * 3;
-                acc[0] += buf[i] * kv;
-                acc[1] += buf[i + 1] * kv;
-                acc[2] += buf[i + 2] * kv;
+        let out = &mut buf[y * w * 3..(y + 1) * w * 3];
+        out.iter_mut().for_each(|v| *v = 0.0);
+        for (t, kv) in k.iter().enumerate() {
+            let yy = (y + t).saturating_sub(r).min(h - 1);
+            let src = &tmp[yy * w * 3..(yy + 1) * w * 3];
+            for (o, s) in out.iter_mut().zip(src) {
+                *o += kv * s;
             }
-            let o = (y * w + x) * 3;
-            tmp[o..o + 3].copy_from_slice(&acc);
         }
     }
-    for y in 0..h {
-        for x in 0..w {
-            let mut acc = [0.0f32; 3];
-            for (t, kv) in k.iter().enumerate() {
-                let yy = (y as i64 + t as i64 - r).clamp(0, h as i64 - 1) as usize;
-                let i = (yy * w + x) * 3;
-                acc[0] += tmp[i] * kv;
-                acc[1] += tmp[i + 1] * kv;
-                acc[2] += tmp[i + 2] * kv;
-            }
-            let o = (y * w + x) * 3;
-            buf[o..o + 3].copy_from_slice(&acc);
+}
+
+/// One row of the horizontal pass (interleaved RGB); `padded` is scratch of (w + 2r) * 3.
+pub fn blur_row(src: &[f32], dst: &mut [f32], k: &[f32], r: usize, padded: &mut [f32]) {
+    let n = src.len();
+    let w = n / 3;
+    padded[r * 3..r * 3 + n].copy_from_slice(src);
+    for i in 0..r {
+        padded[i * 3..i * 3 + 3].copy_from_slice(&src[0..3]);
+        let o = (r + w + i) * 3;
+        padded[o..o + 3].copy_from_slice(&src[n - 3..n]);
+    }
+    dst.iter_mut().for_each(|v| *v = 0.0);
+    for (t, kv) in k.iter().enumerate() {
+        let s = &padded[t * 3..t * 3 + n];
+        for (o, v) in dst.iter_mut().zip(s) {
+            *o += kv * v;
         }
     }
 }

@@ -9,7 +9,7 @@
 use crate::camera::Camera;
 use crate::math::{smoothstep, V3};
 use crate::mesh::{Pose, Tri};
-use crate::shade::{linear_to_srgb, shade_triangle, srgb_to_linear, Lighting, Rgb};
+use crate::shade::{shade_triangle, srgb_to_linear, Lighting, Rgb};
 use crate::world::World;
 
 /// Samples closer than this (metres, camera z) are clipped.
@@ -420,28 +420,37 @@ impl Target {
         let (w, h) = (self.w / ss, self.h / ss);
         let mut img = image::RgbImage::new(w as u32, h as u32);
         let norm = 1.0 / (ss * ss) as f32;
+        let top = (crate::shade::SRGB_LUT_N - 1) as f32;
         let gain = [
-            light.exposure * light.white_balance[0] * norm,
-            light.exposure * light.white_balance[1] * norm,
-            light.exposure * light.white_balance[2] * norm,
+            light.exposure * light.white_balance[0] * norm * top,
+            light.exposure * light.white_balance[1] * norm * top,
+            light.exposure * light.white_balance[2] * norm * top,
         ];
-        for (y, row) in img.rows_mut().enumerate() {
-            for (x, px) in row.enumerate() {
+        let lut = crate::shade::srgb_lut();
+        let enc = |v: f32, g: f32| lut[((v * g).clamp(0.0, top) + 0.5) as usize];
+        let out = img.as_mut();
+        if ss == 1 {
+            for (px, c) in out.chunks_exact_mut(3).zip(&self.color) {
+                px[0] = enc(c[0], gain[0]);
+                px[1] = enc(c[1], gain[1]);
+                px[2] = enc(c[2], gain[2]);
+            }
+            return img;
+        }
+        for (y, row) in out.chunks_exact_mut(w * 3).enumerate() {
+            for (x, px) in row.chunks_exact_mut(3).enumerate() {
                 let mut acc = [0.0f32; 3];
                 for sj in 0..ss {
                     let base = (y * ss + sj) * self.w + x * ss;
-                    for si in 0..ss {
-                        let c = self.color[base + si];
+                    for c in &self.color[base..base + ss] {
                         acc[0] += c[0].min(4.0);
                         acc[1] += c[1].min(4.0);
                         acc[2] += c[2].min(4.0);
                     }
                 }
-                *px = image::Rgb([
-                    linear_to_srgb(acc[0] * gain[0]),
-                    linear_to_srgb(acc[1] * gain[1]),
-                    linear_to_srgb(acc[2] * gain[2]),
-                ]);
+                px[0] = enc(acc[0], gain[0]);
+                px[1] = enc(acc[1], gain[1]);
+                px[2] = enc(acc[2], gain[2]);
             }
         }
         img

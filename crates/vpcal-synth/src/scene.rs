@@ -22,6 +22,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::Arc;
 
 use rand::Rng;
 use rayon::prelude::*;
@@ -32,7 +33,7 @@ use crate::math::{rng_for, RngExt, V3};
 use crate::mesh::{Mesh, Pose};
 use crate::raster::{Backdrop, Target, NEAR_M};
 use crate::shade::Lighting;
-use crate::vehicle::{VehicleKind, VehicleSpec};
+use crate::vehicle::{VehicleKind, VehicleModel, VehicleSpec};
 use crate::world::{generate_world, Ground, LayoutKind, World, WorldParams};
 use crate::SynthError;
 
@@ -274,7 +275,7 @@ pub fn suite_specs(frames: u32, seed: u64) -> Vec<SceneSpec> {
 struct Agent {
     id: u32,
     spec: VehicleSpec,
-    mesh: Mesh,
+    model: Arc<VehicleModel>,
     /// Lane index and arc length, or a fixed pose when parked.
     lane: Option<usize>,
     s: f64,
@@ -440,13 +441,13 @@ impl SceneState {
             }
             pose.heading =
                 crate::world::wrap_angle(pose.heading + (self.rng.normal() * 2.5).to_radians());
-            let mesh = spec.build();
+            let model = Arc::new(spec.build_model());
             let id = self.next_id;
             self.next_id += 1;
             self.agents.push(Agent {
                 id,
                 spec,
-                mesh,
+                model,
                 lane: None,
                 s: 0.0,
                 v: 0.0,
@@ -544,7 +545,7 @@ impl SceneState {
             }
             let heavy = matches!(spec.kind, VehicleKind::Truck | VehicleKind::Bus);
             let v0 = lane.speed_mps * self.rng.uni(0.85, 1.12) * if heavy { 0.8 } else { 1.0 };
-            let mesh = spec.build();
+            let model = Arc::new(spec.build_model());
             let id = self.next_id;
             self.next_id += 1;
             let headway_s = self.rng.uni(1.0, 1.8);
@@ -552,7 +553,7 @@ impl SceneState {
             self.agents.push(Agent {
                 id,
                 spec,
-                mesh,
+                model,
                 lane: Some(li),
                 s: 0.0,
                 v: v0 * 0.9,
@@ -617,6 +618,9 @@ pub fn clear_view(world: &mut World, cam: &Camera) {
 /// The static part of the picture (road, props, their shadows), in horizontal bands.
 struct StaticLayer {
     bands: Vec<Target>,
+    /// Per band: (vehicle id, samples it covers when drawn alone) of the parked vehicles,
+    /// which are baked into the layer.
+    parked: Vec<Vec<(u32, usize)>>,
 }
 
 const BAND_ROWS: usize = 48;
@@ -624,26 +628,53 @@ const BAND_ROWS: usize = 48;
 impl StaticLayer {
     fn new(state: &SceneState) -> StaticLayer {
         let cam = &state.camera;
+        let light = &state.light;
         let (w, h) = (cam.width as usize, cam.height as usize);
         let ss = state.spec.supersample;
+        let parked: Vec<(&Agent, Mesh, Mesh)> = state
+            .agents
+            .iter()
+            .filter(|a| a.lane.is_none())
+            .map(|a| {
+                (
+                    a,
+                    a.model.mesh.placed(&a.pose),
+                    a.model.shadow.placed(&a.pose),
+                )
+            })
+            .collect();
+        let ao = 0.35 + 0.3 * (1.0 - light.shadow_strength);
         let starts: Vec<usize> = (0..h).step_by(BAND_ROWS).collect();
-        let bands = starts
+        let done: Vec<(Target, Vec<(u32, usize)>)> = starts
             .par_iter()
             .map(|&y0| {
                 let rows = BAND_ROWS.min(h - y0);
                 let mut t = Target::new(0.0, y0 as f64, w, rows, ss);
                 for p in &state.world.props {
-                    t.draw(cam, &state.light, &p.mesh.tris, 1);
+                    t.draw(cam, light, &p.mesh.tris, 1);
+                }
+                for (a, mesh, _) in &parked {
+                    t.draw(cam, light, &mesh.tris, 1000 + a.id);
                 }
                 for p in state.world.props.iter().filter(|p| p.casts_shadow) {
-                    t.draw_shadow(cam, &state.light, &p.mesh.tris);
+                    t.draw_shadow(cam, light, &p.mesh.tris);
                 }
-                t.fill_background(cam, &state.light, Backdrop::World(&state.world));
+                for (a, _, shadow) in &parked {
+                    t.draw_shadow(cam, light, &shadow.tris);
+                    t.draw_contact_shadow(cam, &a.pose, a.spec.length, a.spec.width, ao);
+                }
+                t.fill_background(cam, light, Backdrop::World(&state.world));
                 t.shade.iter_mut().for_each(|s| *s = 1.0);
-                t
+                let alone = parked
+                    .iter()
+                    .map(|(a, mesh, _)| (a.id, t.coverage(cam, &mesh.tris)))
+                    .filter(|&(_, n)| n > 0)
+                    .collect();
+                (t, alone)
             })
             .collect();
-        StaticLayer { bands }
+        let (bands, parked) = done.into_iter().unzip();
+        StaticLayer { bands, parked }
     }
 }
 
@@ -652,6 +683,60 @@ impl StaticLayer {
 pub struct Frame {
     pub image: image::RgbImage,
     pub vehicles: Vec<VehicleTruth>,
+}
+
+/// A vehicle prepared for one frame.
+struct Placed<'a> {
+    agent: &'a Agent,
+    mesh: Mesh,
+    shadow: Mesh,
+    /// Image rows (min, max) that the vehicle or its shadow may cover.
+    rows: (f64, f64),
+}
+
+/// Image rows covered by a vehicle's box and its shadow; `None` when it cannot be seen.
+fn touched_rows(
+    cam: &Camera,
+    light: &Lighting,
+    spec: &VehicleSpec,
+    pose: &Pose,
+) -> Option<(f64, f64)> {
+    let l = light.sun_dir;
+    let lz = l.z.max(0.08);
+    let mut pts = Vec::with_capacity(16);
+    for c in spec.bb3d_world(pose) {
+        pts.push(c);
+        pts.push(V3::new(c.x - l.x * c.z / lz, c.y - l.y * c.z / lz, 0.0));
+    }
+    let mut lo = f64::MAX;
+    let mut hi = f64::MIN;
+    let mut any_front = false;
+    let mut any_behind = false;
+    let mut xs = (f64::MAX, f64::MIN);
+    for p in pts {
+        let c = cam.to_camera(p);
+        if c.z < NEAR_M {
+            any_behind = true;
+            continue;
+        }
+        any_front = true;
+        let q = cam.project_cam(c)?;
+        lo = lo.min(q[1]);
+        hi = hi.max(q[1]);
+        xs = (xs.0.min(q[0]), xs.1.max(q[0]));
+    }
+    if !any_front {
+        return None;
+    }
+    if any_behind {
+        // Partly behind the camera: the projection is unbounded.
+        return Some((f64::MIN, f64::MAX));
+    }
+    let (w, h) = (f64::from(cam.width), f64::from(cam.height));
+    if xs.1 < 0.0 || xs.0 > w || hi < 0.0 || lo > h {
+        return None;
+    }
+    Some((lo, hi))
 }
 
 /// A rendered band and, per vehicle id, (visible samples, samples when drawn alone).
@@ -691,42 +776,66 @@ impl SceneRenderer {
         let st = &self.state;
         let cam = &st.camera;
         let light = &st.light;
-        // Vehicles worth drawing: in front of the camera.
-        let placed: Vec<(&Agent, Mesh)> = st
+        // Vehicles worth drawing: placed meshes, shadow proxies and the image rows they (and
+        // their shadows) may touch.
+        let placed: Vec<Placed> = st
             .agents
             .iter()
-            .filter(|a| {
-                let c = cam.to_camera(V3::new(a.pose.x, a.pose.y, 0.0));
-                c.z > -a.spec.length && c.z < 2000.0
+            .filter(|a| a.lane.is_some())
+            .filter_map(|a| {
+                let mesh = a.model.mesh.placed(&a.pose);
+                let shadow = a.model.shadow.placed(&a.pose);
+                let rows = touched_rows(cam, light, &a.spec, &a.pose)?;
+                Some(Placed {
+                    agent: a,
+                    mesh,
+                    shadow,
+                    rows,
+                })
             })
-            .map(|a| (a, a.mesh.placed(&a.pose)))
             .collect();
         let ao = 0.35 + 0.3 * (1.0 - light.shadow_strength);
         let results: Vec<BandResult> = self
             .layer
             .bands
             .par_iter()
-            .map(|band| {
+            .zip(&self.layer.parked)
+            .map(|(band, parked)| {
+                let s = f64::from(band.ss);
+                let (r0, r1) = (band.y0, band.y0 + band.h as f64 / s);
+                let here: Vec<&Placed> = placed
+                    .iter()
+                    .filter(|p| p.rows.1 >= r0 && p.rows.0 <= r1)
+                    .collect();
                 let mut t = band.clone();
-                for (a, m) in &placed {
-                    t.draw(cam, light, &m.tris, 1000 + a.id);
+                for p in &here {
+                    t.draw(cam, light, &p.mesh.tris, 1000 + p.agent.id);
                 }
-                for (a, m) in &placed {
-                    t.draw_shadow(cam, light, &m.tris);
-                    t.draw_contact_shadow(cam, &a.pose, a.spec.length, a.spec.width, ao);
+                for p in &here {
+                    t.draw_shadow(cam, light, &p.shadow.tris);
+                    t.draw_contact_shadow(
+                        cam,
+                        &p.agent.pose,
+                        p.agent.spec.length,
+                        p.agent.spec.width,
+                        ao,
+                    );
                 }
                 t.apply_shade();
-                let mut counts = Vec::with_capacity(placed.len());
+                let mut counts = Vec::with_capacity(here.len());
                 let mut seen = std::collections::HashMap::new();
                 for &id in &t.id {
                     if id >= 1000 {
                         *seen.entry(id - 1000).or_insert(0usize) += 1;
                     }
                 }
-                for (a, m) in &placed {
-                    let vis = seen.get(&a.id).copied().unwrap_or(0);
-                    let alone = t.coverage(cam, &m.tris);
-                    counts.push((a.id, vis, alone));
+                for p in &here {
+                    let vis = seen.get(&p.agent.id).copied().unwrap_or(0);
+                    let alone = t.coverage(cam, &p.mesh.tris);
+                    counts.push((p.agent.id, vis, alone));
+                }
+                for &(id, alone) in parked {
+                    counts.push((id, seen.get(&id).copied().unwrap_or(0), alone));
                 }
                 (t.resolve(light), counts)
             })
@@ -747,7 +856,7 @@ impl SceneRenderer {
         }
         // Silhouette parts outside the image count as invisible.
         let mut vehicles = Vec::new();
-        for (a, _) in &placed {
+        for a in st.agents.iter() {
             let Some(b) = project_box(cam, &a.spec, &a.pose) else {
                 continue;
             };
@@ -803,37 +912,30 @@ fn post_frame<R: Rng>(img: &mut image::RgbImage, blur: f64, noise: f64, rng: &mu
     let mut buf: Vec<f32> = img.as_raw().iter().map(|&v| f32::from(v)).collect();
     if blur > 0.05 {
         let s = blur as f32;
-        let r = (s * 3.0).ceil().max(1.0) as i64;
-        let k: Vec<f32> = (-r..=r)
-            .map(|i| (-(i * i) as f32 / (2.0 * s * s)).exp())
+        let r = (s * 3.0).ceil().max(1.0) as usize;
+        let k: Vec<f32> = (0..=2 * r)
+            .map(|i| {
+                let d = i as f32 - r as f32;
+                (-(d * d) / (2.0 * s * s)).exp()
+            })
             .collect();
         let ks: f32 = k.iter().sum();
         let k: Vec<f32> = k.iter().map(|v| v / ks).collect();
         let mut tmp = vec![0.0f32; buf.len()];
-        tmp.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
-            for x in 0..w {
-                let mut acc = [0.0f32; 3];
-                for (t, kv) in k.iter().enumerate() {
-                    let xx = (x as i64 + t as i64 - r).clamp(0, w as i64 - 1) as usize;
-                    let i = (y * w + xx) * 3;
-                    acc[0] += buf[i] * kv;
-                    acc[1] += buf[i + 1] * kv;
-                    acc[2] += buf[i + 2] * kv;
+        tmp.par_chunks_mut(w * 3)
+            .zip(buf.par_chunks(w * 3))
+            .for_each_init(
+                || vec![0.0f32; (w + 2 * r) * 3],
+                |pad, (dst, src)| crate::post::blur_row(src, dst, &k, r, pad),
+            );
+        buf.par_chunks_mut(w * 3).enumerate().for_each(|(y, out)| {
+            out.iter_mut().for_each(|v| *v = 0.0);
+            for (t, kv) in k.iter().enumerate() {
+                let yy = (y + t).saturating_sub(r).min(h - 1);
+                let src = &tmp[yy * w * 3..(yy + 1) * w * 3];
+                for (o, s) in out.iter_mut().zip(src) {
+                    *o += kv * s;
                 }
-                row[x * 3..x * 3 + 3].copy_from_slice(&acc);
-            }
-        });
-        buf.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
-            for x in 0..w {
-                let mut acc = [0.0f32; 3];
-                for (t, kv) in k.iter().enumerate() {
-                    let yy = (y as i64 + t as i64 - r).clamp(0, h as i64 - 1) as usize;
-                    let i = (yy * w + x) * 3;
-                    acc[0] += tmp[i] * kv;
-                    acc[1] += tmp[i + 1] * kv;
-                    acc[2] += tmp[i + 2] * kv;
-                }
-                row[x * 3..x * 3 + 3].copy_from_slice(&acc);
             }
         });
     }
@@ -842,15 +944,18 @@ fn post_frame<R: Rng>(img: &mut image::RgbImage, blur: f64, noise: f64, rng: &mu
         .zip(buf.par_chunks(w * 3))
         .enumerate()
         .for_each(|(y, (dst, src))| {
-            let mut r = rng_for(seed, &[y as u64]);
+            let mut state = crate::math::splitmix(seed ^ (y as u64).wrapping_mul(0x9E37_79B9));
+            let ns = noise as f32;
             for (px, sp) in dst.chunks_exact_mut(3).zip(src.chunks_exact(3)) {
-                let n = if noise > 0.0 {
-                    (r.normal() * noise) as f32
-                } else {
-                    0.0
-                };
+                // Approximately normal: a sum of four 16-bit uniforms, unit variance.
+                state = crate::math::splitmix(state);
+                let u: f32 = (0..4)
+                    .map(|k| ((state >> (16 * k)) & 0xFFFF) as f32)
+                    .sum::<f32>()
+                    / 65536.0;
+                let n = (u - 2.0) * 1.732_050_8 * ns;
                 for (d, s) in px.iter_mut().zip(sp) {
-                    *d = (s + n).round().clamp(0.0, 255.0) as u8;
+                    *d = ((s + n).clamp(0.0, 255.0) + 0.5) as u8;
                 }
             }
         });

@@ -28,14 +28,16 @@ pub fn srgb_to_linear(v: u8) -> f32 {
     lut[v as usize]
 }
 
-/// Linear [0, 1] to sRGB 8-bit (clamped).
-pub fn linear_to_srgb(v: f32) -> u8 {
-    const N: usize = 4096;
+/// Entries of the linear -> sRGB table (index = value * (N - 1)).
+pub const SRGB_LUT_N: usize = 4096;
+
+/// The linear -> sRGB 8-bit table over [0, 1].
+pub fn srgb_lut() -> &'static [u8] {
     static LUT: OnceLock<Vec<u8>> = OnceLock::new();
-    let lut = LUT.get_or_init(|| {
-        (0..N)
+    LUT.get_or_init(|| {
+        (0..SRGB_LUT_N)
             .map(|i| {
-                let c = i as f32 / (N - 1) as f32;
+                let c = i as f32 / (SRGB_LUT_N - 1) as f32;
                 let s = if c <= 0.003_130_8 {
                     c * 12.92
                 } else {
@@ -44,9 +46,13 @@ pub fn linear_to_srgb(v: f32) -> u8 {
                 (s * 255.0 + 0.5).clamp(0.0, 255.0) as u8
             })
             .collect()
-    });
-    let i = (v.clamp(0.0, 1.0) * (N - 1) as f32 + 0.5) as usize;
-    lut[i.min(N - 1)]
+    })
+}
+
+/// Linear [0, 1] to sRGB 8-bit (clamped).
+pub fn linear_to_srgb(v: f32) -> u8 {
+    let i = (v.clamp(0.0, 1.0) * (SRGB_LUT_N - 1) as f32 + 0.5) as usize;
+    srgb_lut()[i.min(SRGB_LUT_N - 1)]
 }
 
 /// An sRGB colour given as 8-bit values, in linear RGB.
@@ -262,7 +268,7 @@ pub fn shade_triangle(l: &Lighting, mat: &Material, n: V3, v: V3) -> Rgb {
             add(add(mul(mat.albedo, irr), refl), hi)
         }
         Surface::Glass => {
-            let f = 0.08 + 0.7 * (1.0 - ndv).powi(3);
+            let f = 0.05 + 0.45 * (1.0 - ndv).powi(4);
             let refl = scale(l.env_radiance(r), f as f32);
             let inside = scale(mul(mat.albedo, irr), 0.5);
             let hi = scale(l.sun, (sun_spec.powi(80) * 1.5) as f32);

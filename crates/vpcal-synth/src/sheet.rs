@@ -179,8 +179,13 @@ pub fn overlay_frame(frame: &RgbImage, cam: &Camera, vehicles: &[VehicleTruth]) 
     img
 }
 
-/// A contact sheet: crops (with their truth drawn) in a grid of `cell` x `cell` tiles.
-pub fn contact_sheet(samples: &[vpcal_data::Sample], cols: usize, cell: u32) -> RgbImage {
+/// A contact sheet: crops (with their truth drawn when `draw`) in a grid of `cell` x `cell` tiles.
+pub fn contact_sheet(
+    samples: &[vpcal_data::Sample],
+    cols: usize,
+    cell: u32,
+    draw: bool,
+) -> RgbImage {
     let cols = cols.max(1);
     let rows = samples.len().div_ceil(cols).max(1);
     let mut sheet = RgbImage::from_pixel(cols as u32 * cell, rows as u32 * cell, Rgb([30, 30, 30]));
@@ -196,7 +201,9 @@ pub fn contact_sheet(samples: &[vpcal_data::Sample], cols: usize, cell: u32) -> 
         let m = |p: [f64; 2]| [p[0] * sc, p[1] * sc];
         let bb = s.bb3d.map(m);
         // Draw in a padded canvas so VP rays show their direction beyond the crop.
-        draw_truth(&mut tile, &bb, Some(m(s.vp1)), Some(m(s.vp2)), 1.2);
+        if draw {
+            draw_truth(&mut tile, &bb, Some(m(s.vp1)), Some(m(s.vp2)), 1.2);
+        }
         let x = (k % cols) as u32 * cell + (cell - nw) / 2;
         let y = (k / cols) as u32 * cell + (cell - nh) / 2;
         image::imageops::replace(&mut sheet, &tile, i64::from(x), i64::from(y));

@@ -93,9 +93,11 @@ fn paint_colour<R: Rng>(rng: &mut R) -> Rgb {
     ];
     let w: Vec<f64> = palette.iter().map(|p| p.0).collect();
     let c = palette[rng.weighted(&w)].1;
-    let j =
-        |v: u8, rng: &mut R| (f64::from(v) * (1.0 + 0.08 * rng.normal())).clamp(3.0, 250.0) as u8;
-    let (r, g, b) = (j(c[0], rng), j(c[1], rng), j(c[2], rng));
+    // Brightness varies more than hue (whites stay white, not pink).
+    let bright = 1.0 + 0.07 * rng.normal();
+    let mut j =
+        |v: u8| (f64::from(v) * bright * (1.0 + 0.02 * rng.normal())).clamp(3.0, 250.0) as u8;
+    let (r, g, b) = (j(c[0]), j(c[1]), j(c[2]));
     srgb(r, g, b)
 }
 
@@ -392,6 +394,25 @@ impl<'a> Builder<'a> {
         );
     }
 
+    /// Rounded lower-body cross-section (12 points): `wf` scales the half width (plan-view
+    /// rounding at the ends), zb/zt are the bottom and top heights.
+    fn rounded_section(hw: f64, zb: f64, zm: f64, zt: f64) -> Vec<(f64, f64)> {
+        let zl = zb + 0.3 * (zm - zb);
+        let zu = zm + 0.6 * (zt - zm);
+        let right = [
+            (hw * 0.92, zb),
+            (hw * 0.99, zl),
+            (hw, zm),
+            (hw * 0.985, zu),
+            (hw * 0.95, zt - 0.03),
+            (hw * 0.85, zt),
+        ];
+        let mut v: Vec<(f64, f64)> = vec![(-hw * 0.92, zb)];
+        v.extend(right.iter().copied());
+        v.extend(right.iter().rev().skip(1).map(|&(y, z)| (-y, z)));
+        v
+    }
+
     fn car(&mut self) {
         let s = self.s;
         let k = s.shape;
@@ -399,7 +420,9 @@ impl<'a> Builder<'a> {
         let hw = w / 2.0;
         let x0 = -len / 2.0;
         let at = |f: f64| x0 + f * len;
-        let suv = s.kind == VehicleKind::Suv;
+        let kind = s.kind;
+        let suv = kind == VehicleKind::Suv;
+        let sedan = kind == VehicleKind::Sedan;
         let r = s.wheel_radius;
         let zb = if suv {
             0.26 + 0.06 * k[0]
@@ -409,14 +432,14 @@ impl<'a> Builder<'a> {
         let belt = h * (0.58 + 0.06 * k[1]).min(0.66);
         let zm = zb + (belt - zb) * (0.5 + 0.15 * k[2]);
         let hood_front = belt - (0.16 + 0.12 * k[3]);
-        let (x_rw, x_rr) = match s.kind {
+        let (x_rw, x_rr) = match kind {
             VehicleKind::Sedan => (0.17 + 0.04 * k[4], 0.31 + 0.05 * k[5]),
             VehicleKind::Hatchback => (0.015, 0.1 + 0.05 * k[5]),
             VehicleKind::Wagon => (0.02, 0.05 + 0.03 * k[5]),
             _ => (0.02, 0.06 + 0.04 * k[5]),
         };
         let x_ws = 0.68 + 0.06 * k[6]
-            - if s.kind == VehicleKind::Hatchback {
+            - if kind == VehicleKind::Hatchback {
                 0.04
             } else {
                 0.0
@@ -427,164 +450,161 @@ impl<'a> Builder<'a> {
             1.45 + 0.5 * k[7]
         };
         let x_rf = x_ws - (h - belt) * rake / len;
-        let trunk = if s.kind == VehicleKind::Sedan {
-            belt - 0.03
-        } else {
-            belt
-        };
+        let trunk = if sedan { belt - 0.03 } else { belt };
+        let dark_bumpers = s.variant % 4 == 0;
 
-        // Lower body.
-        let tk = 0.96;
-        let secs = vec![
-            (
-                at(0.0),
-                Self::body_section(hw * 0.9, zb + 0.08, zm, trunk - 0.07, 0.9),
-            ),
-            (
-                at(0.025),
-                Self::body_section(hw * 0.98, zb + 0.02, zm, trunk - 0.01, tk),
-            ),
-            (
-                at(x_rw.max(0.05)),
-                Self::body_section(hw, zb, zm, trunk, tk),
-            ),
-            (at(x_ws), Self::body_section(hw, zb, zm, belt, tk)),
-            (at(0.93), Self::body_section(hw, zb, zm, hood_front, tk)),
-            (
-                at(0.975),
-                Self::body_section(hw * 0.97, zb + 0.02, zm, hood_front - 0.04, 0.9),
-            ),
-            (
-                at(1.0),
-                Self::body_section(hw * 0.9, zb + 0.08, zm, hood_front - 0.11, 0.85),
-            ),
+        // Lower body: (x fraction, width factor, bottom, top).
+        let mid_hood = (x_ws + 0.93) / 2.0;
+        let stations = [
+            (0.0, 0.86, zb + 0.1, trunk - 0.09),
+            (0.012, 0.93, zb + 0.05, trunk - 0.04),
+            (0.035, 0.985, zb + 0.01, trunk - 0.01),
+            (x_rw.max(0.08), 1.0, zb, trunk),
+            (x_ws, 1.0, zb, belt),
+            (mid_hood, 1.0, zb, (belt + hood_front) / 2.0 + 0.02),
+            (0.93, 1.0, zb, hood_front),
+            (0.965, 0.985, zb + 0.01, hood_front - 0.03),
+            (0.988, 0.94, zb + 0.04, hood_front - 0.07),
+            (1.0, 0.87, zb + 0.08, hood_front - 0.12),
         ];
-        let lower = [
-            self.trim, self.paint, self.paint, self.paint, self.paint, self.paint,
-        ];
-        self.mesh.loft(&secs, &lower, Some(self.paint));
-
-        // Cabin.
-        let hb = hw * tk;
-        let ht = hw * (0.7 + 0.08 * k[2]);
-        let cab = |top: f64| vec![(-hb, belt), (hb, belt), (ht, top), (-ht, top)];
-        let flat = vec![(-hb, belt), (hb, belt), (hb, belt), (-hb, belt)];
-        let x_b = (x_rf + x_rr) / 2.0 + 0.03;
-        let rear_top = if s.kind == VehicleKind::Sedan {
-            belt
-        } else {
-            belt + (h - belt) * 0.15
-        };
-        let mut csecs = vec![
-            (at(x_ws), flat.clone()),
-            (at(x_rf), cab(h)),
-            (at(x_b), cab(h)),
-            (at(x_rr), cab(h)),
-        ];
-        if s.kind == VehicleKind::Sedan {
-            csecs.push((at(x_rw), flat));
-        } else {
-            csecs.push((at(x_rw), cab(rear_top)));
-        }
-        csecs.reverse();
-        self.mesh.loft(&csecs, &[self.paint], Some(self.paint));
-        self.proxy.loft(&csecs, &[self.paint], Some(self.paint));
+        let secs: Vec<(f64, Vec<(f64, f64)>)> = stations
+            .iter()
+            .map(|&(f, wf, b, t)| {
+                (
+                    at(f),
+                    Self::rounded_section(hw * wf, b, zm.min(t - 0.05), t),
+                )
+            })
+            .collect();
+        let nseg = secs.len() - 1;
+        let (paint, trim, dark) = (self.paint, self.trim, self.dark);
+        self.mesh.loft_with(
+            &secs,
+            &|seg, band| {
+                let bumper = seg < 2 || seg + 2 >= nseg;
+                match band {
+                    0 => Some(dark),
+                    1 | 11 if bumper && dark_bumpers => Some(trim),
+                    1 | 11 => Some(if seg > 1 && seg + 2 < nseg {
+                        trim
+                    } else {
+                        paint
+                    }),
+                    _ => Some(paint),
+                }
+            },
+            Some(paint),
+        );
         self.proxy.cuboid(
             V3::new(at(0.0), -hw * 0.95, zb),
             V3::new(at(1.0), hw * 0.95, belt),
-            self.paint,
+            paint,
         );
 
-        // Windows as decals on the cabin faces.
-        let rear_x = at(x_rw);
-        let p = |x: f64, y: f64, z: f64| V3::new(x, y, z);
-        // Windshield.
-        let q = [
-            p(at(x_ws), -hb, belt),
-            p(at(x_ws), hb, belt),
-            p(at(x_rf), ht, h),
-            p(at(x_rf), -ht, h),
-        ];
-        let n = face_normal(&q, V3::new(0.0, 0.0, belt));
-        self.mesh
-            .decal(q, 0.05, 0.95, 0.04, 0.94, n * EPS, self.glass);
-        // Rear window.
-        let q = [
-            p(rear_x, -hb, belt),
-            p(rear_x, hb, belt),
-            p(at(x_rr), ht, h),
-            p(at(x_rr), -ht, h),
-        ];
-        let rq = if s.kind == VehicleKind::Sedan {
-            q
-        } else {
-            [
-                p(rear_x, -hb, belt),
-                p(rear_x, hb, belt),
-                p(rear_x, ht, rear_top),
-                p(rear_x, -ht, rear_top),
+        // Cabin: 8-point sections; bands 1/7 side windows, 2/6 frames, 3/5 roof edges, 4 top.
+        let hb = hw * 0.9;
+        let ht = hw * (0.68 + 0.08 * k[2]);
+        let rr = 0.06;
+        let cab = |top: f64| {
+            let zwt = (top - rr - 0.035).max(belt + 0.05);
+            let f = (zwt - belt) / (top - rr - belt).max(1e-3);
+            let hm = hb + (ht - hb) * f;
+            vec![
+                (-hb, belt),
+                (hb, belt),
+                (hm, zwt),
+                (ht, top - rr),
+                (ht * 0.72, top),
+                (-ht * 0.72, top),
+                (-ht, top - rr),
+                (-hm, zwt),
             ]
         };
-        let n = face_normal(&rq, V3::new(0.0, 0.0, belt));
-        self.mesh
-            .decal(rq, 0.08, 0.92, 0.06, 0.9, n * EPS, self.glass);
-        if s.kind != VehicleKind::Sedan {
-            // Hatch: the sloped roof end is glass too.
-            let q = [
-                p(rear_x, -ht, rear_top),
-                p(rear_x, ht, rear_top),
-                p(at(x_rr), ht, h),
-                p(at(x_rr), -ht, h),
-            ];
-            let n = face_normal(&q, V3::new(0.0, 0.0, belt));
-            self.mesh
-                .decal(q, 0.08, 0.92, 0.0, 0.85, n * EPS, self.glass);
-        }
-        // Side windows.
-        for side in [-1.0, 1.0] {
-            let side_q = |xa: f64, xb: f64, ta: f64, tb: f64| {
-                [
-                    p(at(xa), side * hb, belt),
-                    p(at(xb), side * hb, belt),
-                    p(at(xb), side * ht, tb),
-                    p(at(xa), side * ht, ta),
-                ]
-            };
-            let out = V3::new(0.0, side, (hb - ht) / (h - belt)).normalized() * EPS;
-            let pillar = 0.07 / len;
-            // Front quarter (triangle under the A pillar).
-            let q = side_q(x_rf, x_ws, h, belt);
-            self.mesh.decal(q, 0.12, 0.7, 0.08, 0.85, out, self.glass);
-            // Front door, rear door.
-            let q = side_q(x_b + pillar, x_rf, h, h);
-            self.mesh.decal(q, 0.02, 0.97, 0.08, 0.9, out, self.glass);
-            let q = side_q(x_rr, x_b - pillar, h, h);
-            self.mesh.decal(q, 0.06, 0.98, 0.08, 0.9, out, self.glass);
-            // Rear quarter.
-            let q = side_q(x_rw, x_rr, rear_top, h);
-            let u0 = if s.kind == VehicleKind::Sedan {
-                0.45
-            } else {
-                0.25
-            };
-            self.mesh.decal(q, u0, 0.9, 0.1, 0.85, out, self.glass);
+        let flat = vec![
+            (-hb, belt),
+            (hb, belt),
+            (hb, belt),
+            (hb * 0.95, belt),
+            (hb * 0.85, belt),
+            (-hb * 0.85, belt),
+            (-hb * 0.95, belt),
+            (-hb, belt),
+        ];
+        let x_b = (x_rf + x_rr) / 2.0 + 0.03;
+        let pil = 0.012;
+        let rear_top = belt + (h - belt) * 0.15;
+        // (x fraction, section) from the rear; `side` says which side-window segments are glass.
+        let mut csecs: Vec<(f64, Vec<(f64, f64)>)> = Vec::new();
+        let side: Vec<bool> = if sedan {
+            csecs.push((at(x_rw), flat.clone()));
+            csecs.push((at(x_rr), cab(h)));
+            csecs.push((at(x_rr + 0.035), cab(h)));
+            vec![false, false, true, false, true, false]
+        } else {
+            let x_q = x_rr
+                + if kind == VehicleKind::Hatchback {
+                    0.10
+                } else {
+                    0.13
+                };
+            csecs.push((at(x_rw), cab(rear_top)));
+            csecs.push((at(x_rr), cab(h)));
+            csecs.push((at(x_rr + 0.03), cab(h)));
+            csecs.push((at(x_q), cab(h)));
+            csecs.push((at(x_q + 0.025), cab(h)));
+            vec![
+                false,
+                false,
+                kind != VehicleKind::Hatchback,
+                false,
+                true,
+                false,
+                true,
+                false,
+            ]
+        };
+        csecs.push((at(x_b - pil), cab(h)));
+        csecs.push((at(x_b + pil), cab(h)));
+        csecs.push((at(x_rf), cab(h)));
+        csecs.push((at(x_ws), flat));
+        let nc = csecs.len() - 1;
+        let glass = self.glass;
+        let b_pillar = if k[0] > 0.4 { dark } else { paint };
+        self.mesh.loft_with(
+            &csecs,
+            &|seg, band| {
+                let first = seg == 0;
+                let last = seg + 1 == nc;
+                match band {
+                    0 => None,
+                    // Rear window and windshield.
+                    4 if first || last => Some(glass),
+                    1 | 7 if seg + 3 == nc => Some(b_pillar),
+                    // The front door glass runs on under the A pillar.
+                    1 | 7 if last || side.get(seg).copied().unwrap_or(false) => Some(glass),
+                    _ => Some(paint),
+                }
+            },
+            Some(paint),
+        );
+        self.proxy
+            .loft_with(&csecs, &|_, _| Some(paint), Some(paint));
+
+        for sd in [-1.0, 1.0] {
             // Mirror.
             let mx = at(x_rf) - 0.05;
-            let my = side * (hb + 0.02);
+            let my = sd * (hb + 0.02);
             self.mesh.cuboid(
-                V3::new(mx - 0.12, my.min(my + side * 0.17), belt + 0.02),
-                V3::new(mx + 0.04, my.max(my + side * 0.17), belt + 0.16),
-                if k[4] > 0.5 { self.trim } else { self.paint },
+                V3::new(mx - 0.12, my.min(my + sd * 0.17), belt + 0.02),
+                V3::new(mx + 0.04, my.max(my + sd * 0.17), belt + 0.16),
+                if k[4] > 0.5 { trim } else { paint },
             );
-            // Side skirt and a door-handle line.
-            self.y_plate(
-                side * (hw * 0.97 + EPS),
-                at(0.2),
-                at(0.8),
-                zb + 0.005,
-                zb + 0.06,
-                self.trim,
-            );
+            // Door handles.
+            for xf in [x_b + 0.06, (x_b + x_rr) / 2.0] {
+                let y = sd * (hw * 0.995 + EPS);
+                let z = zm + 0.55 * (belt - zm);
+                self.y_plate(y, at(xf) - 0.1, at(xf), z - 0.02, z + 0.02, trim);
+            }
         }
         // Wheels.
         let wb_rear = 0.17 + 0.04 * k[3];
@@ -592,13 +612,13 @@ impl<'a> Builder<'a> {
         self.axle(at(wb_rear), r, hw, 0.22, false);
         self.axle(at(wb_front), r, hw, 0.22, false);
 
-        // Front: lamps, grille, plate, bumper.
+        // Front: lamps, grille, intake, plate.
         let xf = at(1.0) + EPS;
-        let fhw = hw * 0.9;
-        let zt = hood_front - 0.11;
-        let lamp_h = 0.09 + 0.06 * k[6];
-        for side in [-1.0, 1.0] {
-            let (ya, yb) = (side * fhw * 0.56, side * fhw * 0.93);
+        let fhw = hw * 0.87;
+        let zt = hood_front - 0.12;
+        let lamp_h = (0.08 + 0.06 * k[6]).min((zt - zb - 0.1) * 0.5);
+        for sd in [-1.0, 1.0] {
+            let (ya, yb) = (sd * fhw * 0.55, sd * fhw * 0.95);
             self.x_plate(
                 xf,
                 ya.min(yb),
@@ -608,26 +628,27 @@ impl<'a> Builder<'a> {
                 self.head,
             );
         }
-        let grille_w = fhw * (0.35 + 0.25 * k[0]);
-        self.x_plate(xf, -grille_w, grille_w, zt - 0.16, zt - 0.03, self.dark);
-        self.x_plate(xf, -fhw * 0.6, fhw * 0.6, zb + 0.09, zb + 0.2, self.dark);
+        let grille_w = fhw * (0.3 + 0.22 * k[0]);
+        self.x_plate(xf, -grille_w, grille_w, zt - lamp_h - 0.03, zt - 0.03, dark);
+        self.x_plate(xf, -fhw * 0.6, fhw * 0.6, zb + 0.1, zb + 0.2, dark);
         self.x_plate(xf + EPS, -0.26, 0.26, zb + 0.2, zb + 0.31, self.plate);
-        // Rear.
+        // Rear: lamps, plate, bumper strip.
         let xr = at(0.0) - EPS;
-        let rzt = trunk - 0.07;
-        for side in [-1.0, 1.0] {
-            let (ya, yb) = (side * hw * 0.9 * 0.6, side * hw * 0.9 * 0.95);
+        let rhw = hw * 0.86;
+        let rzt = trunk - 0.09;
+        for sd in [-1.0, 1.0] {
+            let (ya, yb) = (sd * rhw * 0.55, sd * rhw * 0.96);
             self.x_plate(
                 xr,
                 ya.min(yb),
                 ya.max(yb),
-                rzt - 0.16,
+                rzt - 0.17,
                 rzt - 0.03,
                 self.tail,
             );
         }
-        self.x_plate(xr, -0.26, 0.26, zb + 0.25, zb + 0.36, self.plate);
-        self.x_plate(xr, -hw * 0.85, hw * 0.85, zb + 0.08, zb + 0.16, self.trim);
+        self.x_plate(xr, -0.26, 0.26, zb + 0.27, zb + 0.38, self.plate);
+        self.x_plate(xr, -rhw * 0.9, rhw * 0.9, zb + 0.12, zb + 0.2, trim);
     }
 
     fn van(&mut self) {

@@ -524,39 +524,43 @@ pub struct GroundStyle {
 
 impl GroundStyle {
     pub fn random<R: Rng>(rng: &mut R) -> GroundStyle {
-        let a = rng.uni(55.0, 115.0);
-        let warm = rng.uni(-6.0, 6.0);
-        let asphalt = srgb((a + warm) as u8, a as u8, (a - warm + 2.0) as u8);
-        let a2 = a * rng.uni(0.8, 1.25);
+        // Grey levels with a small common tint, so that nothing turns pink or green by chance.
+        let grey = |lo: f64, hi: f64, tint: f64, rng: &mut R| {
+            let v = rng.uni(lo, hi);
+            let t = [
+                rng.normal() * tint,
+                rng.normal() * tint,
+                rng.normal() * tint,
+            ];
+            let c = |k: usize| (v * (1.0 + t[k])).clamp(0.0, 255.0) as u8;
+            srgb(c(0), c(1), c(2))
+        };
+        let asphalt = grey(55.0, 115.0, 0.03, rng);
+        let asphalt2 = grey(50.0, 125.0, 0.03, rng);
+        let marking = grey(200.0, 240.0, 0.015, rng);
+        let concrete = grey(150.0, 195.0, 0.025, rng);
+        let gravel = {
+            let v = rng.uni(110.0, 150.0);
+            srgb(v as u8, (v * 0.95) as u8, (v * 0.86) as u8)
+        };
+        let g = rng.uni(0.7, 1.2);
         GroundStyle {
             asphalt,
-            asphalt2: srgb(a2 as u8, a2 as u8, (a2 + 2.0).min(255.0) as u8),
-            marking: srgb(
-                rng.uni(200.0, 240.0) as u8,
-                rng.uni(200.0, 240.0) as u8,
-                rng.uni(195.0, 235.0) as u8,
-            ),
+            asphalt2,
+            marking,
             yellow: srgb(220, 175, 40),
             grass: srgb(
-                rng.uni(60.0, 110.0) as u8,
-                rng.uni(90.0, 130.0) as u8,
-                rng.uni(40.0, 70.0) as u8,
+                (rng.uni(60.0, 100.0) * g) as u8,
+                (rng.uni(95.0, 125.0) * g) as u8,
+                (rng.uni(40.0, 65.0) * g) as u8,
             ),
             dry: srgb(
-                rng.uni(120.0, 160.0) as u8,
+                rng.uni(125.0, 160.0) as u8,
                 rng.uni(115.0, 140.0) as u8,
-                rng.uni(70.0, 95.0) as u8,
+                rng.uni(75.0, 95.0) as u8,
             ),
-            concrete: srgb(
-                rng.uni(150.0, 190.0) as u8,
-                rng.uni(150.0, 188.0) as u8,
-                rng.uni(145.0, 182.0) as u8,
-            ),
-            gravel: srgb(
-                rng.uni(120.0, 150.0) as u8,
-                rng.uni(112.0, 140.0) as u8,
-                rng.uni(100.0, 128.0) as u8,
-            ),
+            concrete,
+            gravel,
             wear: rng.uni(0.0, 0.6),
             seed: rng.random(),
         }
@@ -927,7 +931,7 @@ fn highway<R: Rng>(rng: &mut R, p: WorldParams, style: GroundStyle, curved: bool
                 path: road.lane_path(side, i, -smax, smax),
                 // Inner lanes are faster.
                 speed_mps: speed * (1.0 + 0.1 * f64::from(n - 1 - i)) * rng.uni(0.9, 1.1),
-                rate: rng.uni(0.12, 0.4),
+                rate: rng.uni(0.35, 1.0),
                 signal: None,
             });
         }
@@ -987,7 +991,7 @@ fn intersection<R: Rng>(rng: &mut R, p: WorldParams, style: GroundStyle) -> Worl
                 lanes.push(Lane {
                     path: road.lane_path(side, i, -reach, reach),
                     speed_mps: speed * rng.uni(0.9, 1.1),
-                    rate: rng.uni(0.08, 0.2),
+                    rate: rng.uni(0.1, 0.25),
                     signal: Some((phase, stop)),
                 });
             }
@@ -997,7 +1001,7 @@ fn intersection<R: Rng>(rng: &mut R, p: WorldParams, style: GroundStyle) -> Worl
                 lanes.push(Lane {
                     path: turn,
                     speed_mps: speed * 0.7,
-                    rate: rng.uni(0.03, 0.08),
+                    rate: rng.uni(0.04, 0.1),
                     signal: Some((phase, stop)),
                 });
             }
@@ -1183,7 +1187,7 @@ fn parking<R: Rng>(rng: &mut R, p: WorldParams, style: GroundStyle) -> World {
         lanes.push(Lane {
             path: access.lane_path(side, 0, -120.0, lot.len_u + 120.0),
             speed_mps: rng.uni(8.0, 13.0),
-            rate: rng.uni(0.05, 0.15),
+            rate: rng.uni(0.08, 0.2),
             signal: None,
         });
     }
@@ -1353,19 +1357,18 @@ fn roadside_props<R: Rng>(
                 // Arm over the road.
                 let arm = rng.uni(1.0, 2.5);
                 let inward = road.pose(s, t - side * arm);
-                let (ax, ay) = (inward.x - pp.x, inward.y - pp.y);
-                let steps = 4;
-                for k in 0..steps {
-                    let f0 = k as f64 / steps as f64;
-                    let f1 = (k + 1) as f64 / steps as f64;
-                    let a = V3::new(pp.x + ax * f0, pp.y + ay * f0, h - 0.05);
-                    let b = V3::new(pp.x + ax * f1, pp.y + ay * f1, h + 0.05);
-                    m.cuboid(
-                        V3::new(a.x.min(b.x) - 0.05, a.y.min(b.y) - 0.05, a.z),
-                        V3::new(a.x.max(b.x) + 0.05, a.y.max(b.y) + 0.05, b.z),
-                        pole_mat,
-                    );
-                }
+                let mid = Pose {
+                    x: (pp.x + inward.x) / 2.0,
+                    y: (pp.y + inward.y) / 2.0,
+                    heading: (inward.y - pp.y).atan2(inward.x - pp.x),
+                };
+                let mut a = Mesh::new();
+                a.cuboid(
+                    V3::new(-arm / 2.0, -0.05, h - 0.06),
+                    V3::new(arm / 2.0, 0.05, h + 0.04),
+                    pole_mat,
+                );
+                m.extend(&a.placed(&mid));
                 m.cuboid(
                     V3::new(inward.x - 0.3, inward.y - 0.3, h - 0.2),
                     V3::new(inward.x + 0.3, inward.y + 0.3, h),

@@ -148,6 +148,9 @@ pub struct SheetArgs {
     pub cell: u32,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Show the crops without the ground truth drawn over them.
+    #[arg(long)]
+    pub plain: bool,
     #[command(flatten)]
     pub bg: BgArgs,
 }
@@ -246,7 +249,7 @@ fn run_crops(a: &CropsArgs) -> Result<()> {
             .context("re-reading the crops")?;
         let n = src.len().min(36);
         let samples = (0..n).map(|i| src.get(i)).collect::<Result<Vec<_>, _>>()?;
-        let sheet = vpcal_synth::sheet::contact_sheet(&samples, 6, 220);
+        let sheet = vpcal_synth::sheet::contact_sheet(&samples, 6, 220, true);
         let p = a.out.join("sheet.png");
         save(&sheet, &p)?;
         println!("contact sheet: {}", p.display());
@@ -363,7 +366,7 @@ fn run_sheet(a: &SheetArgs) -> Result<()> {
     if samples.is_empty() {
         bail!("no crops to show");
     }
-    let sheet = vpcal_synth::sheet::contact_sheet(&samples, a.cols, a.cell);
+    let sheet = vpcal_synth::sheet::contact_sheet(&samples, a.cols, a.cell, !a.plain);
     save(&sheet, &a.out)?;
     println!(
         "contact sheet of {} crops: {}",
@@ -376,26 +379,28 @@ fn run_sheet(a: &SheetArgs) -> Result<()> {
 fn run_bench(a: &BenchArgs) -> Result<()> {
     use rayon::prelude::*;
     let generator = generator(a.seed, &a.bg)?;
-    let t0 = Instant::now();
-    let pixels: u64 = (0..a.count)
-        .into_par_iter()
-        .map(|i| {
-            generator
-                .generate_index(i)
-                .map(|c| u64::from(c.sample.image.width()) * u64::from(c.sample.image.height()))
-        })
-        .collect::<Result<Vec<_>, _>>()?
-        .iter()
-        .sum();
-    let dt = t0.elapsed().as_secs_f64();
-    println!(
-        "crops: {} in {:.2} s = {:.1} crops/s on {} threads (mean crop {:.0} px^2)",
-        a.count,
-        dt,
-        a.count as f64 / dt,
-        rayon_threads(),
-        (pixels as f64 / a.count.max(1) as f64).sqrt()
-    );
+    if a.count > 0 {
+        let t0 = Instant::now();
+        let pixels: u64 = (0..a.count)
+            .into_par_iter()
+            .map(|i| {
+                generator
+                    .generate_index(i)
+                    .map(|c| u64::from(c.sample.image.width()) * u64::from(c.sample.image.height()))
+            })
+            .collect::<Result<Vec<_>, _>>()?
+            .iter()
+            .sum();
+        let dt = t0.elapsed().as_secs_f64();
+        println!(
+            "crops: {} in {:.2} s = {:.1} crops/s on {} threads (mean crop {:.0} px^2)",
+            a.count,
+            dt,
+            a.count as f64 / dt,
+            rayon_threads(),
+            (pixels as f64 / a.count as f64).sqrt()
+        );
+    }
     if a.frames > 0 {
         for layout in LayoutKind::ALL {
             for (w, h) in [(1280u32, 720u32), (1920, 1080)] {
