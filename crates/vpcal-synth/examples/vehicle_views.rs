@@ -20,6 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         VehicleKind::Hatchback,
         VehicleKind::Wagon,
         VehicleKind::Suv,
+        VehicleKind::Pickup,
         VehicleKind::Van,
         VehicleKind::Truck,
         VehicleKind::Bus,

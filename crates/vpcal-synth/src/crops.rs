@@ -834,6 +834,56 @@ impl SynthCropSource {
         }
     }
 
+    /// A source from a textual spec, for `--data synth:<spec>` style flags:
+    /// `seed=S,len=N[,real=BCS_ROOT][,real_fraction=F][,instances=K][,clean]`.
+    /// `len` is the size of the train split; validation and test get `len / 8` each (the
+    /// vehicle ratio of the split rule).
+    ///
+    /// # Errors
+    /// [`SynthError::Config`] for an unknown key or a bad value, loading errors for `real`.
+    pub fn from_spec(spec: &str, split: Split) -> Result<SynthCropSource, SynthError> {
+        let mut cfg = CropConfig::default();
+        let mut seed = 0u64;
+        let mut len: Option<usize> = None;
+        let mut real: Option<std::path::PathBuf> = None;
+        for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let (k, v) = part.split_once('=').unwrap_or((part, ""));
+            let num = |what: &str| -> Result<f64, SynthError> {
+                v.parse::<f64>()
+                    .ok()
+                    .filter(|x| x.is_finite() && *x >= 0.0)
+                    .ok_or_else(|| SynthError::Config(format!("synthetic source spec {spec:?}: {what} = {v:?} is not a non-negative number")))
+            };
+            match k {
+                "seed" => seed = num("seed")? as u64,
+                "len" => len = Some(num("len")? as usize),
+                "real" => real = Some(v.into()),
+                "real_fraction" => cfg.real_fraction = num("real_fraction")?.min(1.0),
+                "instances" => cfg.instances = (num("instances")? as u32).max(1),
+                "clean" => cfg.artefacts = false,
+                other => {
+                    return Err(SynthError::Config(format!(
+                        "synthetic source spec {spec:?}: unknown key {other:?} (expected seed, len, real, real_fraction, instances, clean)"
+                    )))
+                }
+            }
+        }
+        let len = len.ok_or_else(|| {
+            SynthError::Config(format!("synthetic source spec {spec:?}: missing len=N"))
+        })?;
+        let backgrounds = match real {
+            Some(root) => RealBackground::load_bcs_root(&root)?,
+            None => Vec::new(),
+        };
+        let generator = CropGenerator::new(cfg, seed, Arc::new(backgrounds))?;
+        let n = if split == Split::Train {
+            len
+        } else {
+            (len / 8).max(1)
+        };
+        Ok(SynthCropSource::new(generator, split, n))
+    }
+
     /// Generate with metadata.
     ///
     /// # Errors

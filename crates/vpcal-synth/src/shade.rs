@@ -264,14 +264,15 @@ pub fn shade_triangle(l: &Lighting, mat: &Material, n: V3, v: V3) -> Rgb {
         Surface::Paint => {
             let f = 0.04 + 0.96 * (1.0 - ndv).powi(5);
             let refl = scale(l.env_radiance(r), (f * 0.9) as f32);
-            let hi = scale(l.sun, (sun_spec.powi(40) * 0.6) as f32);
+            // Flat faces would show a glint over their whole area: keep it a mild sheen.
+            let hi = scale(l.sun, (sun_spec.powi(24) * 0.2) as f32);
             add(add(mul(mat.albedo, irr), refl), hi)
         }
         Surface::Glass => {
             let f = 0.05 + 0.45 * (1.0 - ndv).powi(4);
             let refl = scale(l.env_radiance(r), f as f32);
             let inside = scale(mul(mat.albedo, irr), 0.5);
-            let hi = scale(l.sun, (sun_spec.powi(80) * 1.5) as f32);
+            let hi = scale(l.sun, (sun_spec.powi(48) * 0.4) as f32);
             add(add(inside, refl), hi)
         }
         Surface::Rubber => mul(mat.albedo, irr),

@@ -19,6 +19,7 @@ pub enum VehicleKind {
     Hatchback,
     Wagon,
     Suv,
+    Pickup,
     Van,
     Truck,
     Bus,
@@ -31,6 +32,7 @@ impl VehicleKind {
             VehicleKind::Hatchback => "hatchback",
             VehicleKind::Wagon => "wagon",
             VehicleKind::Suv => "suv",
+            VehicleKind::Pickup => "pickup",
             VehicleKind::Van => "van",
             VehicleKind::Truck => "truck",
             VehicleKind::Bus => "bus",
@@ -39,16 +41,17 @@ impl VehicleKind {
 
     /// A class drawn with roughly European traffic frequencies.
     pub fn random<R: Rng>(rng: &mut R) -> VehicleKind {
-        const KINDS: [VehicleKind; 7] = [
+        const KINDS: [VehicleKind; 8] = [
             VehicleKind::Sedan,
             VehicleKind::Hatchback,
             VehicleKind::Wagon,
             VehicleKind::Suv,
+            VehicleKind::Pickup,
             VehicleKind::Van,
             VehicleKind::Truck,
             VehicleKind::Bus,
         ];
-        KINDS[rng.weighted(&[0.24, 0.24, 0.14, 0.16, 0.12, 0.06, 0.04])]
+        KINDS[rng.weighted(&[0.23, 0.23, 0.13, 0.16, 0.04, 0.11, 0.06, 0.04])]
     }
 }
 
@@ -128,6 +131,12 @@ impl VehicleSpec {
                 rng.uni(1.8, 2.0),
                 rng.uni(1.6, 1.85),
                 rng.uni(0.34, 0.39),
+            ),
+            VehicleKind::Pickup => (
+                rng.uni(5.0, 5.9),
+                rng.uni(1.85, 2.05),
+                rng.uni(1.72, 1.95),
+                rng.uni(0.36, 0.40),
             ),
             VehicleKind::Van => (
                 rng.uni(4.8, 6.6),
@@ -261,9 +270,11 @@ impl VehicleSpec {
     pub fn build_model(&self) -> VehicleModel {
         let mut b = Builder::new(self);
         match self.kind {
-            VehicleKind::Sedan | VehicleKind::Hatchback | VehicleKind::Wagon | VehicleKind::Suv => {
-                b.car()
-            }
+            VehicleKind::Sedan
+            | VehicleKind::Hatchback
+            | VehicleKind::Wagon
+            | VehicleKind::Suv
+            | VehicleKind::Pickup => b.car(),
             VehicleKind::Van => b.van(),
             VehicleKind::Truck => b.truck(),
             VehicleKind::Bus => b.bus(),
@@ -421,7 +432,8 @@ impl<'a> Builder<'a> {
         let x0 = -len / 2.0;
         let at = |f: f64| x0 + f * len;
         let kind = s.kind;
-        let suv = kind == VehicleKind::Suv;
+        let pickup = kind == VehicleKind::Pickup;
+        let suv = kind == VehicleKind::Suv || pickup;
         let sedan = kind == VehicleKind::Sedan;
         let r = s.wheel_radius;
         let zb = if suv {
@@ -436,6 +448,8 @@ impl<'a> Builder<'a> {
             VehicleKind::Sedan => (0.17 + 0.04 * k[4], 0.31 + 0.05 * k[5]),
             VehicleKind::Hatchback => (0.015, 0.1 + 0.05 * k[5]),
             VehicleKind::Wagon => (0.02, 0.05 + 0.03 * k[5]),
+            // Pickup: the cab ends where the bed begins.
+            VehicleKind::Pickup => (0.38 + 0.06 * k[4], 0.38 + 0.06 * k[4]),
             _ => (0.02, 0.06 + 0.04 * k[5]),
         };
         let x_ws = 0.68 + 0.06 * k[6]
@@ -484,6 +498,8 @@ impl<'a> Builder<'a> {
                 let bumper = seg < 2 || seg + 2 >= nseg;
                 match band {
                     0 => Some(dark),
+                    // Open load bed of a pickup.
+                    6 if pickup && seg == 2 => None,
                     1 | 11 if bumper && dark_bumpers => Some(trim),
                     1 | 11 => Some(if seg > 1 && seg + 2 < nseg {
                         trim
@@ -530,12 +546,20 @@ impl<'a> Builder<'a> {
             (-hb * 0.95, belt),
             (-hb, belt),
         ];
-        let x_b = (x_rf + x_rr) / 2.0 + 0.03;
+        let x_b = if pickup {
+            (x_rf + x_rw + 0.03) / 2.0
+        } else {
+            (x_rf + x_rr) / 2.0 + 0.03
+        };
         let pil = 0.012;
         let rear_top = belt + (h - belt) * 0.15;
         // (x fraction, section) from the rear; `side` says which side-window segments are glass.
         let mut csecs: Vec<(f64, Vec<(f64, f64)>)> = Vec::new();
-        let side: Vec<bool> = if sedan {
+        let side: Vec<bool> = if pickup {
+            csecs.push((at(x_rw), cab(h)));
+            csecs.push((at(x_rw + 0.03), cab(h)));
+            vec![false, false, true, false, true, false]
+        } else if sedan {
             csecs.push((at(x_rw), flat.clone()));
             csecs.push((at(x_rr), cab(h)));
             csecs.push((at(x_rr + 0.035), cab(h)));
@@ -578,7 +602,7 @@ impl<'a> Builder<'a> {
                 match band {
                     0 => None,
                     // Rear window and windshield.
-                    4 if first || last => Some(glass),
+                    4 if (first && !pickup) || last => Some(glass),
                     1 | 7 if seg + 3 == nc => Some(b_pillar),
                     // The front door glass runs on under the A pillar.
                     1 | 7 if last || side.get(seg).copied().unwrap_or(false) => Some(glass),
@@ -590,6 +614,32 @@ impl<'a> Builder<'a> {
         self.proxy
             .loft_with(&csecs, &|_, _| Some(paint), Some(paint));
 
+        if pickup {
+            let (bx0, bx1) = (at(0.035), at(x_rw));
+            let (yi, zf) = (hw * 0.85, zb + 0.35);
+            let floor = Material::new(srgb(30, 30, 32), Surface::Plastic);
+            self.mesh.quad(
+                V3::new(bx0, -yi, zf),
+                V3::new(bx1, -yi, zf),
+                V3::new(bx1, yi, zf),
+                V3::new(bx0, yi, zf),
+                floor,
+            );
+            for sd in [-1.0, 1.0] {
+                self.y_plate(sd * (yi - EPS), bx0, bx1, zf, trunk, paint);
+            }
+            self.x_plate(bx0 + EPS, -yi, yi, zf, trunk - 0.01, paint);
+            self.x_plate(bx1 - EPS, -yi, yi, zf, belt, paint);
+            // Cab rear window.
+            self.x_plate(
+                bx1 - EPS,
+                -ht * 0.8,
+                ht * 0.8,
+                belt + 0.08,
+                h - rr - 0.06,
+                glass,
+            );
+        }
         for sd in [-1.0, 1.0] {
             // Mirror.
             let mx = at(x_rf) - 0.05;

@@ -470,3 +470,19 @@ fn real_backgrounds_reproduce_their_calibration() {
         assert!((f - c.meta.focal_px).abs() < 1e-6 * f);
     }
 }
+
+#[test]
+fn a_source_spec_selects_seed_length_and_split() {
+    let train = SynthCropSource::from_spec("seed=5,len=80,clean", Split::Train).unwrap();
+    assert_eq!(train.len(), 80);
+    let val = SynthCropSource::from_spec("seed=5,len=80", Split::Validation).unwrap();
+    assert_eq!(val.len(), 10);
+    let again = SynthCropSource::from_spec("len=80,seed=5,clean", Split::Train).unwrap();
+    assert_eq!(train.get(3).unwrap().image, again.get(3).unwrap().image);
+    for bad in ["seed=5", "seed=x,len=3", "len=3,colour=red"] {
+        let err = SynthCropSource::from_spec(bad, Split::Train)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(bad), "{err}");
+    }
+}
