@@ -288,11 +288,15 @@ impl Worker {
                     continue;
                 }
             };
-            let raw = a.image.as_raw();
-            for c in 0..3 {
-                batch
-                    .images
-                    .extend(raw.iter().skip(c).step_by(3).map(|&v| f32::from(v) / 255.0));
+            // HWC u8 → CHW f32 in [0, 1]
+            let i0 = batch.images.len();
+            batch.images.resize(i0 + 3 * plane, 0.0);
+            let (r, rest) = batch.images[i0..].split_at_mut(plane);
+            let (g, b) = rest.split_at_mut(plane);
+            for (k, px) in a.image.as_raw().chunks_exact(3).enumerate().take(plane) {
+                r[k] = f32::from(px[0]) / 255.0;
+                g[k] = f32::from(px[1]) / 255.0;
+                b[k] = f32::from(px[2]) / 255.0;
             }
             let t0 = batch.targets.len();
             batch.targets.resize(t0 + cfg.codec.len(), 0.0);

@@ -152,27 +152,41 @@ fn cubic_weights(t: f64) -> [f64; 4] {
     [far(1.0 + t), near(t), near(1.0 - t), far(2.0 - t)]
 }
 
+/// `floor` without a libm call (exact for |x| < 2^52).
+#[inline]
+fn fast_floor(x: f64) -> i64 {
+    let t = x as i64;
+    t - i64::from((t as f64) > x)
+}
+
+/// Round a value in [0, 255] (after clamping) to u8.
+#[inline]
+fn to_u8(v: f64) -> u8 {
+    (v.clamp(0.0, 255.0) + 0.5) as u8
+}
+
 /// Sample `src` at continuous point (x, y) (see the module conventions) into `out`.
 fn sample_at(src: &RgbImage, x: f64, y: f64, filter: Resample, out: &mut [u8; 3]) {
-    let (w, h) = (src.width() as i64, src.height() as i64);
+    let (w, h) = (i64::from(src.width()), i64::from(src.height()));
     let raw = src.as_raw();
+    // Clamped to the image, so the index is in range; the image is non-empty (checked by the
+    // caller).
     let px = |ix: i64, iy: i64| -> usize {
         let ix = ix.clamp(0, w - 1);
         let iy = iy.clamp(0, h - 1);
-        // In range after clamping; the image is non-empty (checked by the caller).
         ((iy * w + ix) * 3) as usize
     };
-    // index coordinates: pixel centres at integers
-    let (fx, fy) = (x - 0.5, y - 0.5);
+    // index coordinates: pixel centres at integers; far-away points clamp to the border
+    let fx = (x - 0.5).clamp(-4.0, w as f64 + 4.0);
+    let fy = (y - 0.5).clamp(-4.0, h as f64 + 4.0);
     match filter {
         Resample::Nearest => {
-            let i = px(fx.round() as i64, fy.round() as i64);
+            let i = px(fast_floor(fx + 0.5), fast_floor(fy + 0.5));
             out.copy_from_slice(&raw[i..i + 3]);
         }
         Resample::Bilinear => {
-            let (x0, y0) = (fx.floor(), fy.floor());
-            let (tx, ty) = (fx - x0, fy - y0);
-            let (x0, y0) = (x0 as i64, y0 as i64);
+            let (x0, y0) = (fast_floor(fx), fast_floor(fy));
+            let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
             let mut acc = [0.0f64; 3];
             for (dy, wy) in [(0, 1.0 - ty), (1, ty)] {
                 for (dx, wx) in [(0, 1.0 - tx), (1, tx)] {
@@ -185,37 +199,50 @@ fn sample_at(src: &RgbImage, x: f64, y: f64, filter: Resample, out: &mut [u8; 3]
                     }
                 }
             }
-            for c in 0..3 {
-                out[c] = acc[c].round().clamp(0.0, 255.0) as u8;
-            }
+            *out = acc.map(to_u8);
         }
         Resample::Bicubic => {
-            let (x0, y0) = (fx.floor(), fy.floor());
-            let wx = cubic_weights(fx - x0);
-            let wy = cubic_weights(fy - y0);
-            let (x0, y0) = (x0 as i64, y0 as i64);
+            let (x0, y0) = (fast_floor(fx), fast_floor(fy));
+            let wx = cubic_weights(fx - x0 as f64);
+            let wy = cubic_weights(fy - y0 as f64);
             let mut acc = [0.0f64; 3];
-            for (j, wyj) in wy.iter().enumerate() {
-                if *wyj == 0.0 {
-                    continue;
-                }
-                let mut row = [0.0f64; 3];
-                for (i, wxi) in wx.iter().enumerate() {
-                    if *wxi == 0.0 {
+            if x0 >= 1 && y0 >= 1 && x0 + 2 < w && y0 + 2 < h {
+                // interior: no clamping
+                let stride = (w * 3) as usize;
+                let base = (((y0 - 1) * w + (x0 - 1)) * 3) as usize;
+                for (j, wyj) in wy.iter().enumerate() {
+                    if *wyj == 0.0 {
                         continue;
                     }
-                    let k = px(x0 + i as i64 - 1, y0 + j as i64 - 1);
+                    let row = &raw[base + j * stride..base + j * stride + 12];
+                    let mut r = [0.0f64; 3];
+                    for (i, wxi) in wx.iter().enumerate() {
+                        for c in 0..3 {
+                            r[c] += wxi * f64::from(row[i * 3 + c]);
+                        }
+                    }
                     for c in 0..3 {
-                        row[c] += wxi * f64::from(raw[k + c]);
+                        acc[c] += wyj * r[c];
                     }
                 }
-                for c in 0..3 {
-                    acc[c] += wyj * row[c];
+            } else {
+                for (j, wyj) in wy.iter().enumerate() {
+                    if *wyj == 0.0 {
+                        continue;
+                    }
+                    let mut r = [0.0f64; 3];
+                    for (i, wxi) in wx.iter().enumerate() {
+                        let k = px(x0 + i as i64 - 1, y0 + j as i64 - 1);
+                        for c in 0..3 {
+                            r[c] += wxi * f64::from(raw[k + c]);
+                        }
+                    }
+                    for c in 0..3 {
+                        acc[c] += wyj * r[c];
+                    }
                 }
             }
-            for c in 0..3 {
-                out[c] = acc[c].round().clamp(0.0, 255.0) as u8;
-            }
+            *out = acc.map(to_u8);
         }
     }
 }

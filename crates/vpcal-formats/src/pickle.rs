@@ -79,10 +79,10 @@ pub enum Value {
     Dict(Vec<(Value, Value)>),
     Set(Vec<Value>),
     FrozenSet(Vec<Value>),
-    /// A numpy array.
-    Array(NdArray),
+    /// A numpy array (boxed: it is the largest variant).
+    Array(Box<NdArray>),
     /// A numpy scalar (`numpy.float64(1.5)` and the like): an [`NdArray`] with an empty shape.
-    Scalar(NdArray),
+    Scalar(Box<NdArray>),
 }
 
 /// A byte range of the input, `offset` counted from where reading started.
@@ -669,7 +669,53 @@ struct Machine<R: BufRead> {
     nodes: Vec<Node>,
     stack: Vec<Id>,
     marks: Vec<usize>,
-    memo: HashMap<u64, Id>,
+    memo: Memo,
+}
+
+/// The memo: dense for the small, sequential keys picklers write; sparse beyond.
+#[derive(Debug, Default)]
+struct Memo {
+    /// `dense[key]` = node id + 1 (0: empty).
+    dense: Vec<u32>,
+    sparse: HashMap<u64, Id>,
+    /// Distinct keys stored (what `MEMOIZE` uses as the next key).
+    count: u64,
+}
+
+impl Memo {
+    /// Store `id` under `key`; keys below `dense_limit` use the dense table (its memory is then
+    /// bounded by the caller's limit).
+    fn put(&mut self, key: u64, id: Id, dense_limit: u64) {
+        let slot = u32::try_from(id).ok().and_then(|i| i.checked_add(1));
+        match (usize::try_from(key), slot) {
+            (Ok(k), Some(slot)) if key < dense_limit => {
+                if k >= self.dense.len() {
+                    self.dense.resize(k + 1, 0);
+                }
+                if !self.sparse.is_empty() && self.sparse.remove(&key).is_some() {
+                    self.count -= 1;
+                }
+                if self.dense[k] == 0 {
+                    self.count += 1;
+                }
+                self.dense[k] = slot;
+            }
+            _ => {
+                if self.sparse.insert(key, id).is_none() {
+                    self.count += 1;
+                }
+            }
+        }
+    }
+
+    fn get(&self, key: u64) -> Option<Id> {
+        let dense = usize::try_from(key)
+            .ok()
+            .and_then(|k| self.dense.get(k))
+            .filter(|&&slot| slot != 0)
+            .map(|&slot| slot as usize - 1);
+        dense.or_else(|| self.sparse.get(&key).copied())
+    }
 }
 
 type StepResult<T> = Result<T, ErrorKind>;
@@ -687,7 +733,7 @@ impl<R: BufRead> Machine<R> {
             nodes: vec![Node::None, Node::Bool(false), Node::Bool(true)],
             stack: Vec::new(),
             marks: Vec::new(),
-            memo: HashMap::new(),
+            memo: Memo::default(),
         }
     }
 
@@ -1155,22 +1201,22 @@ impl<R: BufRead> Machine<R> {
                 let line = self.read_line("PUT argument")?;
                 let key = parse_memo_key(&line)?;
                 let id = self.top()?;
-                self.memo.insert(key, id);
+                self.memo.put(key, id, self.dense_memo_limit());
             }
             b'q' => {
                 let key = self.read_u8("BINPUT argument")?;
                 let id = self.top()?;
-                self.memo.insert(u64::from(key), id);
+                self.memo.put(u64::from(key), id, self.dense_memo_limit());
             }
             b'r' => {
                 let key = self.read_u32("LONG_BINPUT argument")?;
                 let id = self.top()?;
-                self.memo.insert(u64::from(key), id);
+                self.memo.put(u64::from(key), id, self.dense_memo_limit());
             }
             0x94 => {
                 let id = self.top()?;
-                let key = self.memo.len() as u64;
-                self.memo.insert(key, id);
+                let key = self.memo.count;
+                self.memo.put(key, id, self.dense_memo_limit());
             }
             b'g' => {
                 let line = self.read_line("GET argument")?;
@@ -1300,9 +1346,15 @@ impl<R: BufRead> Machine<R> {
         Ok(())
     }
 
+    /// Memo keys below this go to the dense table: picklers number memoized objects
+    /// sequentially, so real keys stay below the number of objects built.
+    fn dense_memo_limit(&self) -> u64 {
+        self.nodes.len() as u64 + 1024
+    }
+
     fn get_memo(&mut self, key: u64) -> StepResult<()> {
-        match self.memo.get(&key) {
-            Some(&id) => {
+        match self.memo.get(key) {
+            Some(id) => {
                 self.stack.push(id);
                 Ok(())
             }
@@ -1630,8 +1682,11 @@ impl<R: BufRead> Machine<R> {
     fn finish(mut self, root: Id) -> StepResult<Value> {
         let input_len = self.known_len.unwrap_or(self.input.pos);
         let budget = input_len.saturating_mul(16).saturating_add(1 << 20);
+        // The memo and the stack are not needed any more.
+        self.memo = Memo::default();
+        self.stack = Vec::new();
         let mut conv = Converter {
-            state: vec![Visit::New; self.nodes.len()],
+            state: vec![VISIT_NEW; self.nodes.len()],
             refs: vec![0; self.nodes.len()],
             cache: HashMap::new(),
         };
@@ -1639,6 +1694,7 @@ impl<R: BufRead> Machine<R> {
         if cost > budget {
             return Err(ErrorKind::TooLarge(budget));
         }
+        conv.state = Vec::new();
         conv.refs[root] = 1;
         conv.build(&mut self.nodes, root)
     }
@@ -1648,15 +1704,16 @@ impl<R: BufRead> Machine<R> {
 // From nodes to values
 // ---------------------------------------------------------------------------------------------
 
-#[derive(Debug, Clone, Copy)]
-enum Visit {
-    New,
-    InProgress,
-    Done(u64),
-}
+/// `Converter::state` of a node not visited yet.
+const VISIT_NEW: u64 = u64::MAX;
+/// `Converter::state` of a node whose children are being visited.
+const VISIT_IN_PROGRESS: u64 = u64::MAX - 1;
+/// Expanded costs saturate below the two markers.
+const MAX_COST: u64 = u64::MAX - 2;
 
 struct Converter {
-    state: Vec<Visit>,
+    /// Per node: [`VISIT_NEW`], [`VISIT_IN_PROGRESS`] or the expanded cost once visited.
+    state: Vec<u64>,
     /// Number of references to each node from the reachable graph.
     refs: Vec<u32>,
     /// Converted values of shared nodes, with the number of uses left.
@@ -1697,16 +1754,16 @@ impl Converter {
             return Err(ErrorKind::TooDeep);
         }
         match self.state.get(id) {
-            Some(Visit::Done(cost)) => return Ok(*cost),
-            Some(Visit::InProgress) => {
+            Some(&VISIT_NEW) => {}
+            Some(&VISIT_IN_PROGRESS) => {
                 return Err(ErrorKind::Unsupported(
                     "self-referencing structures (a container that contains itself)".into(),
                 ))
             }
-            Some(Visit::New) => {}
+            Some(&cost) => return Ok(cost),
             None => return invalid("internal: dangling node id"),
         }
-        self.state[id] = Visit::InProgress;
+        self.state[id] = VISIT_IN_PROGRESS;
         let Some(node) = nodes.get(id) else {
             return invalid("internal: dangling node id");
         };
@@ -1735,7 +1792,7 @@ impl Converter {
             }
             cost = cost.saturating_add(self.analyse(nodes, child, depth + 1)?);
         }
-        self.state[id] = Visit::Done(cost);
+        self.state[id] = cost.min(MAX_COST);
         Ok(cost)
     }
 
@@ -1783,16 +1840,16 @@ impl Converter {
                 }
                 Value::Dict(dedupe_dict(out)?)
             }
-            Node::Scalar(a) => Value::Scalar(*a),
+            Node::Scalar(a) => Value::Scalar(a),
             Node::Array(a) => match a.built {
                 Some((shape, dtype, Body::Typed(data))) => {
-                    Value::Array(NdArray { shape, dtype, data })
+                    Value::Array(Box::new(NdArray { shape, dtype, data }))
                 }
-                Some((shape, dtype, Body::Objects(ids))) => Value::Array(NdArray {
+                Some((shape, dtype, Body::Objects(ids))) => Value::Array(Box::new(NdArray {
                     shape,
                     dtype,
                     data: ArrayData::Object(self.build_all(nodes, &ids)?),
-                }),
+                })),
                 None => return invalid("numpy array whose state was never set (no BUILD)"),
             },
             Node::Global(_) | Node::Dtype(_) | Node::Taken => {
@@ -2366,10 +2423,10 @@ impl Value {
     pub fn at(&self, i: usize) -> Option<&Value> {
         match self {
             Value::List(v) | Value::Tuple(v) => v.get(i),
-            Value::Array(NdArray {
-                data: ArrayData::Object(v),
-                ..
-            }) => v.get(i),
+            Value::Array(a) => match &a.data {
+                ArrayData::Object(v) => v.get(i),
+                _ => None,
+            },
             _ => None,
         }
     }
@@ -2428,10 +2485,10 @@ impl Value {
     pub fn as_bool(&self) -> Option<bool> {
         match self {
             Value::Bool(b) => Some(*b),
-            Value::Scalar(NdArray {
-                data: ArrayData::Bool(v),
-                ..
-            }) => v.first().copied(),
+            Value::Scalar(a) => match &a.data {
+                ArrayData::Bool(v) => v.first().copied(),
+                _ => None,
+            },
             _ => None,
         }
     }
@@ -2450,14 +2507,11 @@ impl Value {
         match self {
             Value::Bytes(b) => Some(Cow::Borrowed(b)),
             Value::Str(s) => latin1_bytes(s).ok().map(Cow::Owned),
-            Value::Array(NdArray {
-                data: ArrayData::U8(v),
-                ..
-            }) => Some(Cow::Borrowed(v)),
-            Value::Array(NdArray {
-                data: ArrayData::I8(v),
-                ..
-            }) => Some(Cow::Owned(v.iter().map(|&b| b as u8).collect())),
+            Value::Array(a) => match &a.data {
+                ArrayData::U8(v) => Some(Cow::Borrowed(v)),
+                ArrayData::I8(v) => Some(Cow::Owned(v.iter().map(|&b| b as u8).collect())),
+                _ => None,
+            },
             _ => None,
         }
     }
@@ -2465,7 +2519,7 @@ impl Value {
     /// A numpy array (not a scalar).
     pub fn as_array(&self) -> Option<&NdArray> {
         match self {
-            Value::Array(a) => Some(a),
+            Value::Array(a) => Some(a.as_ref()),
             _ => None,
         }
     }
@@ -2507,15 +2561,22 @@ impl Value {
         }
     }
 
-    /// Decimal text of an integer (`Int` or `BigInt`), `None` for other values.
+    /// Decimal text of an integer (`Int` or `BigInt`), `None` for other values and, as Python's
+    /// `str()`, for integers of more than about [`MAX_INT_DIGITS`] digits (the conversion is
+    /// quadratic).
     pub fn to_decimal_string(&self) -> Option<String> {
         match self {
             Value::Int(i) => Some(i.to_string()),
-            Value::BigInt(b) => Some(le_twos_complement_to_decimal(b)),
+            Value::BigInt(b) if b.len() <= MAX_BIGINT_BYTES_TO_DECIMAL => {
+                Some(le_twos_complement_to_decimal(b))
+            }
             _ => None,
         }
     }
 }
+
+/// Bytes of a two's-complement integer of [`MAX_INT_DIGITS`] decimal digits (4300 · log2(10) / 8).
+const MAX_BIGINT_BYTES_TO_DECIMAL: usize = 1787;
 
 fn le_twos_complement_to_decimal(bytes: &[u8]) -> String {
     let neg = bytes.last().is_some_and(|b| b & 0x80 != 0);
@@ -2669,10 +2730,10 @@ impl<'a> View<'a> {
     pub fn items(&self) -> Result<Vec<View<'a>>, AccessError> {
         let items: &'a [Value] = match self.value {
             Value::List(v) | Value::Tuple(v) => v,
-            Value::Array(NdArray {
-                data: ArrayData::Object(v),
-                ..
-            }) => v,
+            Value::Array(a) => match &a.data {
+                ArrayData::Object(v) => v,
+                _ => return Err(self.err("a list")),
+            },
             _ => return Err(self.err("a list")),
         };
         Ok(items

@@ -608,3 +608,23 @@ fn errors_locate_the_element_being_built() {
     let err = pickle::from_slice(&bytes[..ints_at + 22]).unwrap_err();
     assert_eq!(err.location.as_deref(), Some(r#"["ints"][3]"#), "{err}");
 }
+
+#[test]
+fn huge_integers_load_but_are_not_printed() {
+    // LONG4 with 100 kB of magnitude: loads in linear time; decimal text is refused like
+    // Python's str() beyond 4300 digits (the conversion is quadratic).
+    let n = 100_000u32;
+    let mut p = b"\x80\x02\x8b".to_vec();
+    p.extend_from_slice(&n.to_le_bytes());
+    p.extend(std::iter::repeat_n(0x11u8, n as usize));
+    p.push(b'.');
+    let v = pickle::from_slice(&p).unwrap();
+    assert!(matches!(&v, Value::BigInt(b) if b.len() == n as usize));
+    assert_eq!(v.to_decimal_string(), None);
+    let small =
+        pickle::from_slice(b"\x80\x02\x8a\x09\x00\x00\x00\x00\x00\x00\x00\x00\x01.").unwrap();
+    assert_eq!(
+        small.to_decimal_string().as_deref(),
+        Some("18446744073709551616")
+    );
+}

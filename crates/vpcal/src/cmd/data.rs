@@ -132,8 +132,12 @@ fn open_boxcars(dir: &Path) -> anyhow::Result<BoxCars> {
     Ok(bc)
 }
 
-/// `KIND:PATH` → a data source of one split.
-fn open_source(spec: &str, split: Split) -> anyhow::Result<Arc<dyn SampleSource>> {
+/// `KIND:PATH` → a data source of one split (shared with other subcommands that read training
+/// data; add new kinds here).
+///
+/// # Errors
+/// An unknown kind, or the source's own error (naming the file).
+pub fn open_source(spec: &str, split: Split) -> anyhow::Result<Arc<dyn SampleSource>> {
     let Some((kind, path)) = spec.split_once(':') else {
         bail!("--data {spec:?}: expected KIND:PATH, e.g. boxcars:/data/BoxCars116k");
     };
