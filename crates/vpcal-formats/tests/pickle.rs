@@ -628,3 +628,15 @@ fn huge_integers_load_but_are_not_printed() {
         Some("18446744073709551616")
     );
 }
+
+#[test]
+fn memo_keys_far_beyond_the_input_still_work() {
+    // LONG_BINPUT/LONG_BINGET with key 2^32 - 1 (sparse table), then MEMOIZE (next key = 1
+    // distinct key stored so far) and BINGET 1.
+    let p = b"\x80\x04]r\xff\xff\xff\xff0K\x07\x94\x8c\x01a\x94(j\xff\xff\xff\xffh\x01h\x02t.";
+    let v = pickle::from_slice(p).unwrap();
+    assert_eq!(
+        v,
+        Value::Tuple(vec![Value::List(vec![]), Value::Int(7), Value::Str("a".into())])
+    );
+}
