@@ -153,21 +153,22 @@ pub struct CropSample {
     pub meta: CropMeta,
 }
 
-enum Backdrop0 {
+/// What lies behind the vehicles of one setup.
+enum SetupBackdrop {
     World(Box<World>),
     Real(usize),
 }
 
 struct Candidate {
     pose: Pose,
-    lane: Option<usize>,
+    /// The parking stall it occupies, if parked.
     stall: Option<usize>,
 }
 
 /// What is fixed for one vehicle (all its instances).
 struct Setup {
     camera: Camera,
-    backdrop: Backdrop0,
+    backdrop: SetupBackdrop,
     light: Lighting,
     spec: VehicleSpec,
     model: VehicleModel,
@@ -278,8 +279,8 @@ impl CropGenerator {
         let meta = CropMeta {
             kind: setup.spec.kind,
             scene: match &setup.backdrop {
-                Backdrop0::World(w) => w.layout.name().to_string(),
-                Backdrop0::Real(i) => format!(
+                SetupBackdrop::World(w) => w.layout.name().to_string(),
+                SetupBackdrop::Real(i) => format!(
                     "real:{}",
                     self.backgrounds.get(*i).map_or("?", |b| b.name.as_str())
                 ),
@@ -338,7 +339,7 @@ impl CropGenerator {
                 let bg = &self.backgrounds[i];
                 let mut light = Lighting::overcast(&mut rng);
                 light.exposure = 1.0 / light.ground_irradiance(0.0)[1];
-                (bg.camera.clone(), Backdrop0::Real(i), light)
+                (bg.camera.clone(), SetupBackdrop::Real(i), light)
             } else {
                 let [fw, fh] =
                     cfg.frame_sizes[rng.int(0, cfg.frame_sizes.len() as i64 - 1) as usize];
@@ -378,7 +379,7 @@ impl CropGenerator {
                 crate::scene::clear_view(&mut world, &cam);
                 let mut light = Lighting::random(&mut rng);
                 light.exposure = rng.uni(0.75, 1.2) as f32 / light.ground_irradiance(0.0)[1];
-                (cam, Backdrop0::World(Box::new(world)), light)
+                (cam, SetupBackdrop::World(Box::new(world)), light)
             };
             let candidates = self.candidates(&camera, &backdrop, &spec, &mut rng);
             if candidates.is_empty() {
@@ -406,14 +407,14 @@ impl CropGenerator {
     fn candidates<R: Rng>(
         &self,
         cam: &Camera,
-        backdrop: &Backdrop0,
+        backdrop: &SetupBackdrop,
         spec: &VehicleSpec,
         rng: &mut R,
     ) -> Vec<Candidate> {
         let mut out = Vec::new();
         let ok = |pose: &Pose| self.placement_ok(cam, spec, pose);
         match backdrop {
-            Backdrop0::World(world) => {
+            SetupBackdrop::World(world) => {
                 let parked = world.layout == LayoutKind::Parking && rng.chance(0.75);
                 if parked {
                     for (i, st) in world.stalls.iter().enumerate() {
@@ -425,31 +426,26 @@ impl CropGenerator {
                             if ok(&pose) {
                                 out.push(Candidate {
                                     pose,
-                                    lane: None,
                                     stall: Some(i),
                                 });
                             }
                         }
                     }
                 } else {
-                    for (li, lane) in world.lanes.iter().enumerate() {
+                    for lane in &world.lanes {
                         let len = lane.path.length();
                         let mut s = 0.0;
                         while s < len {
                             let pose = lane.path.pose_at(s);
                             if ok(&pose) {
-                                out.push(Candidate {
-                                    pose,
-                                    lane: Some(li),
-                                    stall: None,
-                                });
+                                out.push(Candidate { pose, stall: None });
                             }
                             s += 1.0;
                         }
                     }
                 }
             }
-            Backdrop0::Real(i) => {
+            SetupBackdrop::Real(i) => {
                 let Some(bg) = self.backgrounds.get(*i) else {
                     return out;
                 };
@@ -469,11 +465,7 @@ impl CropGenerator {
                         heading,
                     };
                     if ok(&pose) {
-                        out.push(Candidate {
-                            pose,
-                            lane: None,
-                            stall: None,
-                        });
+                        out.push(Candidate { pose, stall: None });
                     }
                 }
             }
@@ -539,7 +531,7 @@ impl CropGenerator {
             target.draw(cam, light, &mesh.tris, 2 + k as u32);
             placed.push((spec, *p, Some(mesh)));
         }
-        if let Backdrop0::World(world) = &setup.backdrop {
+        if let SetupBackdrop::World(world) = &setup.backdrop {
             for prop in &world.props {
                 if prop_may_overlap(cam, prop.lo, prop.hi, &target) {
                     target.draw(cam, light, &prop.mesh.tris, ID_PROP);
@@ -559,7 +551,7 @@ impl CropGenerator {
             target.draw_shadow(cam, light, &spec.shadow_box().placed(p).tris);
             target.draw_contact_shadow(cam, p, spec.length, spec.width, ao);
         }
-        if let Backdrop0::World(world) = &setup.backdrop {
+        if let SetupBackdrop::World(world) = &setup.backdrop {
             for prop in world.props.iter().filter(|p| p.casts_shadow) {
                 let c = (prop.lo + prop.hi) * 0.5;
                 if ((c.x - pose.x).powi(2) + (c.y - pose.y).powi(2)).sqrt() < 40.0 {
@@ -570,9 +562,9 @@ impl CropGenerator {
         let visible_px = target.count_id(ID_TARGET);
         let alone = target.coverage(cam, &target_mesh.tris).max(1);
         let backdrop = match &setup.backdrop {
-            Backdrop0::World(w) => Backdrop::World(w),
+            SetupBackdrop::World(w) => Backdrop::World(w),
             // The index was drawn from this very list.
-            Backdrop0::Real(i) => Backdrop::Photo(&self.backgrounds[*i].image),
+            SetupBackdrop::Real(i) => Backdrop::Photo(&self.backgrounds[*i].image),
         };
         target.fill_background(cam, light, backdrop);
         let image = target.resolve(light);
@@ -607,7 +599,7 @@ impl CropGenerator {
                 && out.iter().all(|(s, q)| !overlaps(s, q, spec, p))
         };
         match &setup.backdrop {
-            Backdrop0::World(world) => {
+            SetupBackdrop::World(world) => {
                 let near =
                     |p: &Pose| ((p.x - pose.x).powi(2) + (p.y - pose.y).powi(2)).sqrt() < 90.0;
                 if world.layout == LayoutKind::Parking {
@@ -649,9 +641,8 @@ impl CropGenerator {
                         s += adv;
                     }
                 }
-                let _ = cand.lane;
             }
-            Backdrop0::Real(i) => {
+            SetupBackdrop::Real(i) => {
                 let Some(bg) = self.backgrounds.get(*i) else {
                     return out;
                 };
@@ -736,8 +727,7 @@ fn overlaps(a: &VehicleSpec, pa: &Pose, b: &VehicleSpec, pb: &Pose) -> bool {
     };
     let ra = rect(a, pa);
     let rb = rect(b, pb);
-    for (r, p) in [(&ra, pa), (&rb, pb)] {
-        let _ = r;
+    for p in [pa, pb] {
         for axis in [p.heading, p.heading + FRAC_PI_2] {
             let (s, c) = axis.sin_cos();
             let proj = |q: &[V3; 4]| {
@@ -917,7 +907,7 @@ impl vpcal_data::SampleSource for SynthCropSource {
             .map_err(|e| vpcal_data::DataError::Sample {
                 path: "<synthetic>".into(),
                 sample: index.to_string(),
-                message: e.to_string(),
+                message: e.full_message(),
             })
     }
 }

@@ -5,13 +5,13 @@ use std::path::PathBuf;
 /// Errors from rendering and from reading or writing synthetic data sets.
 #[derive(Debug, thiserror::Error)]
 pub enum SynthError {
-    #[error("{path}: {source}")]
+    #[error("cannot access {path}")]
     Io {
         path: PathBuf,
         #[source]
         source: std::io::Error,
     },
-    #[error("{path}: image: {source}")]
+    #[error("cannot read or write the image {path}")]
     Image {
         path: PathBuf,
         #[source]
@@ -33,6 +33,18 @@ pub enum SynthError {
 }
 
 impl SynthError {
+    /// The message with its chain of causes, for places that keep only a string.
+    pub fn full_message(&self) -> String {
+        let mut out = self.to_string();
+        let mut cur: Option<&(dyn std::error::Error + 'static)> = std::error::Error::source(self);
+        while let Some(e) = cur {
+            out.push_str(": ");
+            out.push_str(&e.to_string());
+            cur = e.source();
+        }
+        out
+    }
+
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> SynthError {
         SynthError::Io {
             path: path.into(),

@@ -11,6 +11,27 @@
 //!   with BrnoCompSpeed-style ground truth; [`scene::suite_specs`] is the benchmark suite.
 //! - [`sheet`]: contact sheets and overlays to check the ground truth by eye.
 //!
+//! From the command line (crate `vpcal`):
+//! ```text
+//! vpcal synth crops --count 10000 --out crops/ --seed 1 [--real-bg ../shared/data/bcs] [--sheet]
+//! vpcal synth scene --layout highway --frames 300 --out scenes/ --seed 2 [--width 1920 --height 1080]
+//! vpcal synth suite --out suite/ [--frames 150]        # 14 scenes, focal 600-4000 px
+//! vpcal synth sheet --out sheet.png [--from crops/]     # crops with 3D boxes and VP rays
+//! vpcal synth bench                                     # crops/s and frames/s
+//! vpcal eval bcs --dataset suite/dataset --results suite/results   # scores system_*.json
+//! ```
+//! A training flag can use [`crops::SynthCropSource::from_spec`]
+//! (`seed=S,len=N[,real=BCS_ROOT]`) or [`dataset::CropDirSource`] (a crops directory).
+//!
+//! # What is modelled
+//! Cars (sedan, hatchback, wagon, SUV, pickup), vans, trucks (rigid and semi) and buses as
+//! lofted, faceted bodies with glass cabins, pillars, wheels in arches, lamps, grille and
+//! plates, random sizes and colours; roads with lane markings, tyre tracks, patches,
+//! crossings, parking stalls; poles, rails, walls, gantries, signs, trees, buildings; sun/sky/
+//! overcast/dusk light with cast and contact shadows and haze; optional real BrnoCompSpeed
+//! views as backgrounds; blur, motion blur, sensor noise, tone changes and JPEG artefacts.
+//! Not modelled: night, rain, lens distortion, smooth (per-vertex) shading.
+//!
 //! # Conventions
 //! - World: metres, z up, the road is the plane z = 0. Vehicles: local x forward, y left, z up,
 //!   origin at the centre of the footprint; heading in radians from world +x towards +y.

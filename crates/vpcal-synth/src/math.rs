@@ -156,24 +156,36 @@ pub fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
     t * t * (3.0 - 2.0 * t)
 }
 
-/// Hash of two integers and a seed to [0, 1).
+/// Hash of two integers and a seed to [0, 1) (32-bit integer mixing; fast, not cryptographic).
 pub fn hash2(ix: i64, iy: i64, seed: u32) -> f32 {
-    let h = splitmix(
-        (ix as u64).wrapping_mul(0x8DA6_B343)
-            ^ (iy as u64).wrapping_mul(0xD816_3841)
-            ^ u64::from(seed) << 32,
-    );
-    (h >> 40) as f32 / (1u64 << 24) as f32
+    let mut h = (ix as u32).wrapping_mul(0x8DA6_B343)
+        ^ (iy as u32).wrapping_mul(0xD816_3841)
+        ^ seed.wrapping_mul(0xCB1A_B31F);
+    h ^= h >> 15;
+    h = h.wrapping_mul(0x2C1B_3C6D);
+    h ^= h >> 12;
+    h = h.wrapping_mul(0x297A_2D39);
+    h ^= h >> 15;
+    (h >> 8) as f32 / 16_777_216.0
+}
+
+/// floor() as an integer without a libm call (the baseline x86-64 target has no SSE4.1 round).
+#[inline]
+pub fn floor_i(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x {
+        i - 1
+    } else {
+        i
+    }
 }
 
 /// 2D value noise in [0, 1), smooth, unit feature size.
 pub fn value_noise(x: f64, y: f64, seed: u32) -> f32 {
-    let fx = x.floor();
-    let fy = y.floor();
-    let ix = fx as i64;
-    let iy = fy as i64;
-    let tx = (x - fx) as f32;
-    let ty = (y - fy) as f32;
+    let ix = floor_i(x);
+    let iy = floor_i(y);
+    let tx = (x - ix as f64) as f32;
+    let ty = (y - iy as f64) as f32;
     let sx = tx * tx * (3.0 - 2.0 * tx);
     let sy = ty * ty * (3.0 - 2.0 * ty);
     let a = hash2(ix, iy, seed);

@@ -303,12 +303,14 @@ impl Mesh {
 
     /// This mesh placed on the road at (x, y) with the given heading (rotation about z).
     pub fn placed(&self, pose: &Pose) -> Mesh {
+        let (s, c) = pose.heading.sin_cos();
+        let f = |p: V3| V3::new(pose.x + c * p.x - s * p.y, pose.y + s * p.x + c * p.y, p.z);
         Mesh {
             tris: self
                 .tris
                 .iter()
                 .map(|t| Tri {
-                    p: [pose.apply(t.p[0]), pose.apply(t.p[1]), pose.apply(t.p[2])],
+                    p: [f(t.p[0]), f(t.p[1]), f(t.p[2])],
                     mat: t.mat,
                 })
                 .collect(),

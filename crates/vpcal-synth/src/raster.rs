@@ -493,10 +493,9 @@ pub fn bilinear_linear(img: &image::RgbImage, u: f64, v: f64) -> Rgb {
     let (w, h) = (img.width() as i64, img.height() as i64);
     let x = u - 0.5;
     let y = v - 0.5;
-    let xf = x.floor();
-    let yf = y.floor();
-    let tx = (x - xf) as f32;
-    let ty = (y - yf) as f32;
+    let (ix, iy) = (crate::math::floor_i(x), crate::math::floor_i(y));
+    let tx = (x - ix as f64) as f32;
+    let ty = (y - iy as f64) as f32;
     let px = |ix: i64, iy: i64| {
         let p = img.get_pixel(ix.clamp(0, w - 1) as u32, iy.clamp(0, h - 1) as u32);
         [
@@ -505,7 +504,6 @@ pub fn bilinear_linear(img: &image::RgbImage, u: f64, v: f64) -> Rgb {
             srgb_to_linear(p[2]),
         ]
     };
-    let (ix, iy) = (xf as i64, yf as i64);
     let a = px(ix, iy);
     let b = px(ix + 1, iy);
     let c = px(ix, iy + 1);

@@ -331,7 +331,7 @@ impl SceneState {
     pub fn new(spec: &SceneSpec) -> Result<SceneState, SynthError> {
         spec.validate()?;
         let mut rng = rng_for(spec.seed, &[0x5CE4E]);
-        let (w, h) = (f64::from(spec.width), f64::from(spec.height));
+        let w = f64::from(spec.width);
         for _attempt in 0..50 {
             let f = spec.focal_px.unwrap_or_else(|| w * rng.log_uni(0.5, 2.5));
             let hm = spec.height_m.unwrap_or_else(|| rng.uni(5.0, 20.0));
@@ -402,7 +402,6 @@ impl SceneState {
                 time_s: 0.0,
                 rng: rng_for(sim_seed, &[]),
             };
-            let _ = (w, h);
             state.park();
             // Warm up so the road is already busy at frame 0.
             for _ in 0..600 {

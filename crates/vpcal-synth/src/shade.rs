@@ -158,7 +158,6 @@ impl Lighting {
             sky_k as f32 / mix(zen, hor, 0.5)[1].max(1e-3),
         );
         let wb_t = rng.normal() as f32 * 0.04;
-        let _ = shadow;
         let mut l = Lighting {
             sun_dir,
             sun: scale(warm, sun_k as f32),

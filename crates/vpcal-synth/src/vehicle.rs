@@ -1025,7 +1025,6 @@ impl<'a> Builder<'a> {
             .cuboid(V3::new(x0, -hw, zb), V3::new(x1, hw, h), body);
         let win_lo = 1.05 + 0.15 * k[0];
         let win_hi = h - 0.35;
-        let p = V3::new;
         for side in [-1.0, 1.0] {
             let y = side * (hw + EPS);
             // Window band with pillars.
@@ -1050,7 +1049,6 @@ impl<'a> Builder<'a> {
                 let stripe = Material::new(s.second, Surface::Paint);
                 self.y_plate(y, x0 + 0.2, x1 - 0.2, zb + 0.05, win_lo - 0.35, stripe);
             }
-            let _ = p;
         }
         // Windshield and rear window.
         self.x_plate(x1 + EPS, -hw * 0.88, hw * 0.88, 0.95, h - 0.22, self.glass);

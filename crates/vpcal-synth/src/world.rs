@@ -699,7 +699,7 @@ impl World {
         );
         let k = 1.0 + 0.35 * medium + 0.5 * fine - 0.12 * track;
         // Patches: rectangular repairs on a 9 m grid.
-        let (gx, gy) = ((x / 9.0).floor() as i64, (y / 9.0).floor() as i64);
+        let (gx, gy) = (crate::math::floor_i(x / 9.0), crate::math::floor_i(y / 9.0));
         let h = hash2(gx, gy, seed + 3);
         if h < 0.12 {
             let fx = (x / 9.0).fract().abs();
@@ -853,11 +853,6 @@ impl World {
         }
         let wear = 1.0 - st.wear * f64::from(value_noise(x * 0.5, y * 0.5, st.seed + 50));
         mix(base, colour, (cov * wear) as f32)
-    }
-
-    /// The static props as a flat list of meshes.
-    pub fn prop_meshes(&self) -> impl Iterator<Item = &Prop> {
-        self.props.iter()
     }
 }
 
@@ -1075,11 +1070,10 @@ fn right_turn(lane_in: &Path, other: &Road, reach: f64, radius: f64) -> Option<P
         _ => return None,
     };
     // Right turn: new heading = h_in - 90 deg-ish; pick the side of `other` travelling that way.
-    let (oh, ot) = match other.shape {
-        RoadShape::Straight { heading, .. } => (heading, 0.0),
+    let oh = match other.shape {
+        RoadShape::Straight { heading, .. } => heading,
         RoadShape::Arc { .. } => return None,
     };
-    let _ = ot;
     let target = wrap_angle(h_in - FRAC_PI_2);
     let (side, h_out) = if wrap_angle(oh - target).abs() < FRAC_PI_2 {
         (-1.0, oh)
