@@ -42,6 +42,9 @@ impl Material {
 pub struct Tri {
     pub p: [V3; 3],
     pub mat: Material,
+    /// Vertex normals for smooth (Gouraud) shading, oriented like the face normal of
+    /// `(p1 - p0) x (p2 - p0)` up to sign; `None` shades the triangle flat.
+    pub n: Option<[V3; 3]>,
 }
 
 /// A triangle soup. Winding is irrelevant: shading orients each normal towards the viewer.
@@ -56,7 +59,11 @@ impl Mesh {
     }
 
     pub fn tri(&mut self, a: V3, b: V3, c: V3, mat: Material) {
-        self.tris.push(Tri { p: [a, b, c], mat });
+        self.tris.push(Tri {
+            p: [a, b, c],
+            mat,
+            n: None,
+        });
     }
 
     /// Quad a-b-c-d (in order around the rim).
@@ -145,6 +152,97 @@ impl Mesh {
                     V3::new(x0, a[k2].0, a[k2].1),
                     m,
                 );
+            }
+        }
+        if let Some(cap) = cap {
+            for (x, pts) in [sections.first(), sections.last()].into_iter().flatten() {
+                let p: Vec<V3> = pts.iter().map(|&(y, z)| V3::new(*x, y, z)).collect();
+                self.poly(&p, cap);
+            }
+        }
+    }
+
+    /// Like [`Mesh::loft_with`], with smooth vertex normals: each corner's normal averages the
+    /// (area-weighted) normals of the faces around it, except across the `creases` bands,
+    /// which stay flat.
+    pub fn loft_smooth(
+        &mut self,
+        sections: &[(f64, Vec<(f64, f64)>)],
+        mat: &dyn Fn(usize, usize) -> Option<Material>,
+        cap: Option<Material>,
+        creases: &[usize],
+    ) {
+        let nseg = sections.len().saturating_sub(1);
+        let npt = sections.iter().map(|s| s.1.len()).min().unwrap_or(0);
+        if nseg == 0 || npt < 3 {
+            return;
+        }
+        let at = |st: usize, k: usize| {
+            let (x, ref pts) = sections[st];
+            V3::new(x, pts[k % npt].0, pts[k % npt].1)
+        };
+        // Face normals (length = twice the area) of every (segment, band).
+        let face = |seg: usize, band: usize| {
+            let a = at(seg, band);
+            let b = at(seg + 1, band);
+            let c = at(seg + 1, band + 1);
+            let d = at(seg, band + 1);
+            (c - a).cross(d - b)
+        };
+        let faces: Vec<Vec<V3>> = (0..nseg)
+            .map(|s| (0..npt).map(|b| face(s, b)).collect())
+            .collect();
+        let crease = |b: usize| creases.contains(&b);
+        let corner = |seg: usize, band: usize, st: usize, pt: usize| {
+            let own = faces[seg][band];
+            if crease(band) {
+                return own.normalized();
+            }
+            let mut sum = V3::default();
+            for s2 in [st.wrapping_sub(1), st] {
+                if s2 >= nseg {
+                    continue;
+                }
+                for b2 in [(pt + npt - 1) % npt, pt % npt] {
+                    if crease(b2) {
+                        continue;
+                    }
+                    let f = faces[s2][b2];
+                    // Keep orientation consistent with this face.
+                    sum = sum + if f.dot(own) < 0.0 { -f } else { f };
+                }
+            }
+            if sum.norm() > 1e-12 {
+                sum.normalized()
+            } else {
+                own.normalized()
+            }
+        };
+        for seg in 0..nseg {
+            for band in 0..npt {
+                let Some(m) = mat(seg, band) else { continue };
+                let (a, b, c, d) = (
+                    at(seg, band),
+                    at(seg + 1, band),
+                    at(seg + 1, band + 1),
+                    at(seg, band + 1),
+                );
+                let (na, nb, nc, nd) = (
+                    corner(seg, band, seg, band),
+                    corner(seg, band, seg + 1, band),
+                    corner(seg, band, seg + 1, band + 1),
+                    corner(seg, band, seg, band + 1),
+                );
+                self.tris.push(Tri {
+                    p: [a, b, c],
+                    mat: m,
+                    n: Some([na, nb, nc]),
+                });
+                self.tris.push(Tri {
+                    p: [a, c, d],
+                    mat: m,
+                    n: Some([na, nc, nd]),
+                });
             }
         }
         if let Some(cap) = cap {
@@ -312,6 +410,8 @@ impl Mesh {
                 .map(|t| Tri {
                     p: [f(t.p[0]), f(t.p[1]), f(t.p[2])],
                     mat: t.mat,
+                    n: t.n
+                        .map(|n| n.map(|v| V3::new(c * v.x - s * v.y, s * v.x + c * v.y, v.z))),
                 })
                 .collect(),
         }

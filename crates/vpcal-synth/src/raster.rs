@@ -9,7 +9,7 @@
 use crate::camera::Camera;
 use crate::math::{smoothstep, V3};
 use crate::mesh::{Pose, Tri};
-use crate::shade::{shade_triangle, srgb_to_linear, Lighting, Rgb};
+use crate::shade::{shade_oriented, shade_triangle, srgb_to_linear, Lighting, Rgb};
 use crate::world::World;
 
 /// Samples closer than this (metres, camera z) are clipped.
@@ -103,27 +103,51 @@ impl Target {
             let centroid = (t.p[0] + t.p[1] + t.p[2]) * (1.0 / 3.0);
             let to_eye = cam.position - centroid;
             let dist = to_eye.norm();
-            let col = shade_triangle(
-                light,
-                &t.mat,
-                n * (1.0 / nn),
-                to_eye * (1.0 / dist.max(1e-9)),
-            );
-            let col = light.hazed(col, dist);
-            let poly = clip_near(&c);
+            let view = to_eye * (1.0 / dist.max(1e-9));
+            let face = n * (1.0 / nn);
+            let cols: [Rgb; 3] = match t.n {
+                None => {
+                    let col = light.hazed(shade_triangle(light, &t.mat, face, view), dist);
+                    [col; 3]
+                }
+                Some(vn) => {
+                    let face = if face.dot(view) < 0.0 { -face } else { face };
+                    std::array::from_fn(|k| {
+                        let e = cam.position - t.p[k];
+                        let d = e.norm();
+                        let nk = if vn[k].dot(face) < 0.0 { -vn[k] } else { vn[k] };
+                        light.hazed(
+                            shade_oriented(light, &t.mat, nk, e * (1.0 / d.max(1e-9))),
+                            d,
+                        )
+                    })
+                }
+            };
+            let flat = t.n.is_none();
+            let poly = clip_near_attr(&c, &cols);
             if poly.len() < 3 {
                 continue;
             }
-            let pts: Vec<(f64, f64, f64)> = poly.iter().map(|&p| self.to_buffer(cam, p)).collect();
+            let pts: Vec<(f64, f64, f64)> =
+                poly.iter().map(|&(p, _)| self.to_buffer(cam, p)).collect();
             if !self.overlaps(&pts) {
                 continue;
             }
             drawn += 1;
             for k in 1..pts.len() - 1 {
-                self.raster_tri(pts[0], pts[k], pts[k + 1], |tg, idx, d| {
+                let (c0, c1, c2) = (poly[0].1, poly[k].1, poly[k + 1].1);
+                self.raster_tri(pts[0], pts[k], pts[k + 1], |tg, idx, d, w| {
                     if d > tg.depth[idx] {
                         tg.depth[idx] = d;
-                        tg.color[idx] = col;
+                        tg.color[idx] = if flat {
+                            c0
+                        } else {
+                            [
+                                w[0] * c0[0] + w[1] * c1[0] + w[2] * c2[0],
+                                w[0] * c0[1] + w[1] * c1[1] + w[2] * c2[1],
+                                w[0] * c0[2] + w[1] * c1[2] + w[2] * c2[2],
+                            ]
+                        };
                         tg.id[idx] = id;
                     }
                 });
@@ -145,7 +169,7 @@ impl Target {
 
     /// Rasterise one triangle in buffer coordinates (x, y, 1/z); `f` gets the sample index and
     /// the interpolated 1/z of every covered sample centre.
-    fn raster_tri<F: FnMut(&mut Target, usize, f32)>(
+    fn raster_tri<F: FnMut(&mut Target, usize, f32, [f32; 3])>(
         &mut self,
         a: (f64, f64, f64),
         b: (f64, f64, f64),
@@ -188,7 +212,7 @@ impl Target {
             for i in i0..=i1 {
                 if w0 >= 0.0 && w1 >= 0.0 && w2 >= 0.0 {
                     let d = (w0 * a.2 + w1 * b.2 + w2 * c.2) as f32;
-                    f(self, row + i as usize, d);
+                    f(self, row + i as usize, d, [w0 as f32, w1 as f32, w2 as f32]);
                 }
                 w0 += e0.0;
                 w1 += e1.0;
@@ -249,7 +273,7 @@ impl Target {
         for pts in polys {
             for k in 1..pts.len() - 1 {
                 let sh = |p: (f64, f64, f64)| (p.0 - ox, p.1 - oy, p.2);
-                scratch.raster_tri(sh(pts[0]), sh(pts[k]), sh(pts[k + 1]), |_, idx, _| {
+                scratch.raster_tri(sh(pts[0]), sh(pts[k]), sh(pts[k + 1]), |_, idx, _, _| {
                     mask[idx] = true
                 });
             }
@@ -291,7 +315,7 @@ impl Target {
                 continue;
             }
             for m in 1..pts.len() - 1 {
-                self.raster_tri(pts[0], pts[m], pts[m + 1], |tg, idx, _| {
+                self.raster_tri(pts[0], pts[m], pts[m + 1], |tg, idx, _, _| {
                     if tg.id[idx] == ID_BACKGROUND && tg.shade[idx] > k {
                         tg.shade[idx] = k;
                     }
@@ -513,6 +537,36 @@ pub fn bilinear_linear(img: &image::RgbImage, u: f64, v: f64) -> Rgb {
         let top = a[k] + (b[k] - a[k]) * tx;
         let bot = c[k] + (d[k] - c[k]) * tx;
         out[k] = top + (bot - top) * ty;
+    }
+    out
+}
+
+/// [`clip_near`] carrying a colour per vertex.
+fn clip_near_attr(c: &[V3; 3], col: &[Rgb; 3]) -> Vec<(V3, Rgb)> {
+    if c.iter().all(|p| p.z >= NEAR_M) {
+        return vec![(c[0], col[0]), (c[1], col[1]), (c[2], col[2])];
+    }
+    let mut out = Vec::with_capacity(4);
+    for k in 0..3 {
+        let (a, ca) = (c[k], col[k]);
+        let (b, cb) = (c[(k + 1) % 3], col[(k + 1) % 3]);
+        let ain = a.z >= NEAR_M;
+        let bin = b.z >= NEAR_M;
+        if ain {
+            out.push((a, ca));
+        }
+        if ain != bin {
+            let t = (NEAR_M - a.z) / (b.z - a.z);
+            let tf = t as f32;
+            out.push((
+                a.lerp(b, t),
+                [
+                    ca[0] + (cb[0] - ca[0]) * tf,
+                    ca[1] + (cb[1] - ca[1]) * tf,
+                    ca[2] + (cb[2] - ca[2]) * tf,
+                ],
+            ));
+        }
     }
     out
 }

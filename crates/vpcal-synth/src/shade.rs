@@ -255,6 +255,12 @@ impl Lighting {
 /// towards the viewer) seen from unit direction `v` (surface to eye).
 pub fn shade_triangle(l: &Lighting, mat: &Material, n: V3, v: V3) -> Rgb {
     let n = if n.dot(v) < 0.0 { -n } else { n };
+    shade_oriented(l, mat, n, v)
+}
+
+/// Like [`shade_triangle`] for a normal already on the viewer's side (a smooth vertex normal
+/// may point slightly away near silhouettes; it is used as is).
+pub fn shade_oriented(l: &Lighting, mat: &Material, n: V3, v: V3) -> Rgb {
     let ndv = n.dot(v).clamp(0.0, 1.0);
     let r = n * (2.0 * ndv) - v;
     let irr = l.irradiance(n);

@@ -492,7 +492,7 @@ impl<'a> Builder<'a> {
             .collect();
         let nseg = secs.len() - 1;
         let (paint, trim, dark) = (self.paint, self.trim, self.dark);
-        self.mesh.loft_with(
+        self.mesh.loft_smooth(
             &secs,
             &|seg, band| {
                 let bumper = seg < 2 || seg + 2 >= nseg;
@@ -510,6 +510,7 @@ impl<'a> Builder<'a> {
                 }
             },
             Some(paint),
+            &[0],
         );
         self.proxy.cuboid(
             V3::new(at(0.0), -hw * 0.95, zb),
@@ -594,7 +595,7 @@ impl<'a> Builder<'a> {
         let nc = csecs.len() - 1;
         let glass = self.glass;
         let b_pillar = if k[0] > 0.4 { dark } else { paint };
-        self.mesh.loft_with(
+        self.mesh.loft_smooth(
             &csecs,
             &|seg, band| {
                 let first = seg == 0;
@@ -610,6 +611,7 @@ impl<'a> Builder<'a> {
                 }
             },
             Some(paint),
+            &[0],
         );
         self.proxy
             .loft_with(&csecs, &|_, _| Some(paint), Some(paint));
