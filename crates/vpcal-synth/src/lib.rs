@@ -25,12 +25,12 @@
 //!
 //! # What is modelled
 //! Cars (sedan, hatchback, wagon, SUV, pickup), vans, trucks (rigid and semi) and buses as
-//! lofted, faceted bodies with glass cabins, pillars, wheels in arches, lamps, grille and
+//! lofted bodies (cars smooth-shaded, others faceted) with glass cabins, pillars, wheels in arches, lamps, grille and
 //! plates, random sizes and colours; roads with lane markings, tyre tracks, patches,
 //! crossings, parking stalls; poles, rails, walls, gantries, signs, trees, buildings; sun/sky/
 //! overcast/dusk light with cast and contact shadows and haze; optional real BrnoCompSpeed
 //! views as backgrounds; blur, motion blur, sensor noise, tone changes and JPEG artefacts.
-//! Not modelled: night, rain, lens distortion, smooth (per-vertex) shading.
+//! Not modelled: night, rain, lens distortion, interiors, textures on the vehicles.
 //!
 //! # Conventions
 //! - World: metres, z up, the road is the plane z = 0. Vehicles: local x forward, y left, z up,
