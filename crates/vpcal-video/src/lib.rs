@@ -1,18 +1,22 @@
 //! vpcal-video: where vehicle crops come from.
 //!
-//! The first three arrows of the vpcal data flow (DESIGN.md §2):
+//! The first arrows of the vpcal data flow (DESIGN.md §2):
 //!
 //! ```text
-//! frames (video via ffmpeg | image folder | single image), every k-th frame      source
-//!   -> vehicle boxes (motion detector | detections file | learned detector)      detect
-//!   -> per-frame filter: score threshold, drop static vehicles, keep the best 10  filter
-//!   -> crop each box, resize to the network input, batch                          crop
+//! frames (video via ffmpeg | image folder | single image), every k-th frame   source
+//!   -> vehicle boxes (motion detector | detections file | learned detector)   detect
+//!   -> per-frame filter: score threshold, drop static vehicles, best 10        filter (+ edges)
+//!   -> crop each box, resize to the network input                              crop
 //! ```
 //!
 //! # Entry points
 //! - [`source::open_source`] opens a video, image folder or image as a [`FrameSource`]
 //!   (an iterator of [`Frame`]s).
-//! - [`detect::Detector`] is the one detection trait.
+//! - [`detect::Detector`], implemented by [`detect::MotionDetector`] (default),
+//!   [`detect::FileDetector`] and, with the `onnx` feature, `detect::OnnxDetector`.
+//! - [`filter::FrameFilter`]: score threshold, static-vehicle rule, at most 10 per frame.
+//! - [`crop::CropResizer`]: the network's input crops and the box frame they refer to.
+//! - [`draw`]: debug pictures with boxes.
 //!
 //! # Conventions
 //! - Frame pixels: x right, y down, origin at the top-left corner; pixel (i, j) covers
@@ -20,8 +24,14 @@
 //! - Frames are RGB, 8 bit, full resolution.
 //! - Frame indices are 0-based over all decoded frames of the source.
 
+pub mod crop;
+pub mod detect;
+pub mod draw;
+pub mod edges;
 pub mod error;
+pub mod filter;
 pub mod source;
 
+pub use detect::{Detection, Detector};
 pub use error::{Result, VideoError};
 pub use source::{open_source, Frame, FrameSource, SourceInfo, SourceKind, SourceOptions, Start};

@@ -1,0 +1,799 @@
+//! A weight-free motion detector for fixed cameras.
+//!
+//! Every frame is box-filtered down to a small working image (320 px wide by default) and
+//! compared with a per-pixel background model:
+//!
+//! 1. **Warm-up.** The first `warmup_frames` frames only build the model: the background is
+//!    their per-pixel, per-channel median (vehicles passing by are outvoted). Warm-up frames
+//!    give no detections, except the last one.
+//! 2. **Foreground.** A pixel `I` is foreground when its RGB distance `d = |I − B|` from the
+//!    background `B` exceeds `max(min_difference, noise_factor · median(d))`, the median taken
+//!    over the road (most of the road is empty in any frame, so the median measures sensor and
+//!    compression noise, not vehicles). Before that, the per-channel median of `I − B` over
+//!    the road is added to the background: exposure and white-balance drift is not motion.
+//! 3. **Shadows.** A foreground pixel that is a darker copy of the background (brightness ratio
+//!    `a = I·B / B·B` in `shadow_brightness` and colour distortion `|I − aB| / |aB|` below
+//!    `shadow_chroma`) is a cast shadow, not a vehicle (Horprasert et al., 1999).
+//! 4. **Mask and morphology.** Pixels outside the optional road mask are dropped; an opening
+//!    removes speckle, a closing fills holes (windows, dark paint) and joins fragments.
+//! 5. **Blobs.** 8-connected components; boxes closer than `merge_gap_frac` of the width are
+//!    merged (a vehicle cut in two by a lamp post or its windscreen); boxes are kept when their
+//!    area is between `min_area_frac` and `max_area_frac` of the frame, no side is longer than
+//!    `max_side_frac` of the frame, the sides' ratio is at most `max_aspect`, the foreground
+//!    fills at least `min_fill` of the box, the blob moved since the previous frame
+//!    (`min_moving_frac` of its pixels changed: not a ghost or a stopped vehicle), and
+//!    (optionally) the box does not touch the frame border (a vehicle cut by the border gives
+//!    a wrong box frame).
+//! 6. **Update.** `B ← B + ρ (I − B)` with `ρ = 1 − exp(−Δt / τ)`, `Δt` the time since the
+//!    previous frame given to the detector and `τ = background_time_s` on background pixels,
+//!    `foreground_time_s` on foreground pixels (a vehicle that stops is absorbed slowly, the
+//!    ghost of a parked vehicle that leaves fades). Rates follow the clock, so `every K`
+//!    does not change the model's memory. When more than `max_foreground_frac` of the road
+//!    changes at once (an exposure jump, a lighting change), the model is reset to the
+//!    current frame and that frame gives no detections.
+//!
+//! **Score** = fill × size factor, in [0, 1]: `fill` is the fraction of the box covered by
+//! foreground pixels; the size factor rises linearly from 0.25 at the minimum area to 1 at
+//! four times the minimum area. Well-separated vehicles score 0.5–0.9; ragged or tiny blobs
+//! score low.
+//!
+//! Known limits: vehicles that touch in the image merge into one box; vehicles that stop for
+//! long are absorbed into the background; grey vehicles on a grey road can be taken for
+//! shadows in part; it needs a fixed camera.
+
+use fast_image_resize as fir;
+use image::{GrayImage, Luma, RgbImage};
+use imageproc::distance_transform::Norm;
+use imageproc::region_labelling::{connected_components, Connectivity};
+use std::path::{Path, PathBuf};
+use vpcal_geom::BoxPx;
+
+use super::{Detection, Detector};
+use crate::error::{Result, VideoError};
+use crate::source::Frame;
+
+/// Settings of [`MotionDetector`] (see the module docs for what each does).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct MotionConfig {
+    /// Width of the working image in pixels (frames narrower than this are used as they are).
+    pub work_width: u32,
+    /// Frames used to build the initial background.
+    pub warmup_frames: usize,
+    /// The warm-up frames are spread over at least this many seconds (frames closer in time
+    /// are skipped), so that slow vehicles are not taken for background.
+    pub warmup_s: f64,
+    /// Time constant (seconds) of the background update on background pixels.
+    pub background_time_s: f64,
+    /// Time constant (seconds) of the background update on foreground pixels.
+    pub foreground_time_s: f64,
+    /// Foreground threshold as a multiple of the frame's noise level `median(d)`.
+    pub noise_factor: f32,
+    /// Minimum RGB distance (0–441) from the background for a foreground pixel.
+    pub min_difference: f32,
+    /// Whether to remove cast shadows.
+    pub shadow_suppression: bool,
+    /// Range of brightness ratio (pixel / background) that can be a shadow.
+    pub shadow_brightness: (f32, f32),
+    /// Largest relative colour distortion of a shadow.
+    pub shadow_chroma: f32,
+    /// Opening radius (working pixels, square element).
+    pub open_radius: u8,
+    /// Closing radius (working pixels, square element).
+    pub close_radius: u8,
+    /// Boxes closer than this fraction of the working width are merged.
+    pub merge_gap_frac: f64,
+    /// Smallest box area as a fraction of the frame area.
+    pub min_area_frac: f64,
+    /// Largest box area as a fraction of the frame area.
+    pub max_area_frac: f64,
+    /// Longest box side as a fraction of the frame's side.
+    pub max_side_frac: f64,
+    /// Smallest fraction of the box covered by foreground.
+    pub min_fill: f64,
+    /// Largest ratio of the longer to the shorter box side (rows of far vehicles merged into
+    /// one blob are long and thin).
+    pub max_aspect: f64,
+    /// Drop boxes that touch the frame border.
+    pub drop_at_frame_edge: bool,
+    /// A blob is moving when at least this fraction of its pixels changed since the previous
+    /// frame; other blobs (ghosts, stopped vehicles) are not reported and are absorbed into
+    /// the background at the background rate.
+    pub min_moving_frac: f64,
+    /// Above this foreground fraction the frame is treated as a global change.
+    pub max_foreground_frac: f64,
+}
+
+impl Default for MotionConfig {
+    fn default() -> Self {
+        MotionConfig {
+            work_width: 320,
+            warmup_frames: 10,
+            warmup_s: 3.0,
+            background_time_s: 5.0,
+            foreground_time_s: 60.0,
+            noise_factor: 3.0,
+            min_difference: 20.0,
+            shadow_suppression: true,
+            shadow_brightness: (0.35, 0.92),
+            shadow_chroma: 0.12,
+            open_radius: 1,
+            close_radius: 2,
+            merge_gap_frac: 0.008,
+            min_area_frac: 0.0004,
+            max_area_frac: 0.25,
+            max_side_frac: 0.7,
+            min_fill: 0.25,
+            max_aspect: 4.0,
+            drop_at_frame_edge: true,
+            min_moving_frac: 0.05,
+            max_foreground_frac: 0.5,
+        }
+    }
+}
+
+/// Background brightness (RGB norm) below which the shadow test is not attempted.
+const SHADOW_MIN_BACKGROUND: f32 = 30.0;
+
+/// Reads a road mask image (white = road, any other value = not road) as grey.
+///
+/// # Errors
+/// [`VideoError::Image`] when it cannot be decoded.
+pub fn load_road_mask(path: &Path) -> Result<GrayImage> {
+    let img = image::open(path).map_err(|e| VideoError::Image {
+        path: path.to_path_buf(),
+        message: format!("cannot decode road mask ({e})"),
+    })?;
+    Ok(img.into_luma8())
+}
+
+/// Model state once the frame size is known.
+#[derive(Debug)]
+struct Model {
+    frame_w: u32,
+    frame_h: u32,
+    w: u32,
+    h: u32,
+    /// Background, RGB f32, row-major.
+    bg: Vec<f32>,
+    /// Time of the last frame seen, seconds.
+    last_time_s: Option<f64>,
+    /// Road mask at working size (true = road).
+    mask: Option<Vec<bool>>,
+    /// Warm-up frames at working size.
+    warm: Vec<Vec<u8>>,
+    /// Time of the last warm-up frame kept.
+    warm_last_s: Option<f64>,
+    /// The previous frame at working size.
+    prev: Option<Vec<u8>>,
+    ready: bool,
+}
+
+/// The weight-free motion detector (see the module docs).
+#[derive(Debug)]
+pub struct MotionDetector {
+    config: MotionConfig,
+    road_mask: Option<(GrayImage, PathBuf)>,
+    model: Option<Model>,
+    resizer: fir::Resizer,
+    work: Vec<u8>,
+    frames_seen: u64,
+    last_foreground: Option<GrayImage>,
+}
+
+impl MotionDetector {
+    /// A detector with `config` and no road mask.
+    ///
+    /// # Errors
+    /// [`VideoError::InvalidOption`] for a zero working width or rates outside [0, 1].
+    pub fn new(config: MotionConfig) -> Result<MotionDetector> {
+        if config.work_width < 16 {
+            return Err(VideoError::InvalidOption {
+                name: "work_width",
+                value: config.work_width.to_string(),
+                expected: "at least 16 pixels",
+            });
+        }
+        for (name, v) in [
+            ("background_time_s", config.background_time_s),
+            ("foreground_time_s", config.foreground_time_s),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(VideoError::InvalidOption {
+                    name,
+                    value: v.to_string(),
+                    expected: "a positive time in seconds",
+                });
+            }
+        }
+        Ok(MotionDetector {
+            config,
+            road_mask: None,
+            model: None,
+            resizer: fir::Resizer::new(),
+            work: Vec::new(),
+            frames_seen: 0,
+            last_foreground: None,
+        })
+    }
+
+    /// Restricts detection to the white part of `mask` (e.g. BrnoCompSpeed's
+    /// `video_mask.png`). The mask must have the frames' aspect ratio; it is resized to the
+    /// working size. `path` is only used in error messages.
+    pub fn with_road_mask(mut self, mask: GrayImage, path: impl Into<PathBuf>) -> MotionDetector {
+        self.road_mask = Some((mask, path.into()));
+        self
+    }
+
+    /// The settings in use.
+    pub fn config(&self) -> &MotionConfig {
+        &self.config
+    }
+
+    /// The foreground mask of the last frame after morphology, at working size (255 =
+    /// foreground), for debugging pictures.
+    pub fn last_foreground(&self) -> Option<&GrayImage> {
+        self.last_foreground.as_ref()
+    }
+
+    /// The current background at working size, for debugging pictures.
+    pub fn background(&self) -> Option<RgbImage> {
+        let m = self.model.as_ref().filter(|m| m.ready)?;
+        // Why: values are averages of u8 samples, within [0, 255].
+        let px: Vec<u8> =
+            m.bg.iter()
+                .map(|&v| v.round().clamp(0.0, 255.0) as u8)
+                .collect();
+        RgbImage::from_raw(m.w, m.h, px)
+    }
+
+    /// True while the background is still being built (no detections yet).
+    pub fn is_warming_up(&self) -> bool {
+        self.model.as_ref().is_none_or(|m| !m.ready)
+    }
+
+    fn init_model(&self, frame_w: u32, frame_h: u32) -> Result<Model> {
+        let (w, h) = if frame_w <= self.config.work_width {
+            (frame_w, frame_h)
+        } else {
+            let h = (f64::from(frame_h) * f64::from(self.config.work_width) / f64::from(frame_w))
+                .round()
+                .max(1.0);
+            // Why: a positive value no larger than frame_h.
+            (self.config.work_width, h as u32)
+        };
+        let mask = match &self.road_mask {
+            None => None,
+            Some((m, path)) => Some(resize_mask(m, path, frame_w, frame_h, w, h)?),
+        };
+        let n = w as usize * h as usize;
+        Ok(Model {
+            frame_w,
+            frame_h,
+            w,
+            h,
+            bg: vec![0.0; 3 * n],
+            last_time_s: None,
+            mask,
+            warm: Vec::new(),
+            warm_last_s: None,
+            prev: None,
+            ready: false,
+        })
+    }
+
+    fn downscale(&mut self, image: &RgbImage, w: u32, h: u32) -> Result<()> {
+        let n = 3 * w as usize * h as usize;
+        if image.width() == w && image.height() == h {
+            self.work.clear();
+            self.work.extend_from_slice(image.as_raw());
+            return Ok(());
+        }
+        let src = fir::images::ImageRef::new(
+            image.width(),
+            image.height(),
+            image.as_raw(),
+            fir::PixelType::U8x3,
+        )
+        .map_err(|e| resize_error(&e))?;
+        self.work.resize(n, 0);
+        let mut dst = fir::images::Image::from_slice_u8(w, h, &mut self.work, fir::PixelType::U8x3)
+            .map_err(|e| resize_error(&e))?;
+        let opts =
+            fir::ResizeOptions::new().resize_alg(fir::ResizeAlg::Convolution(fir::FilterType::Box));
+        self.resizer
+            .resize(&src, &mut dst, &opts)
+            .map_err(|e| resize_error(&e))
+    }
+
+    /// Processes one frame: updates the model and returns the foreground boxes.
+    fn process(&mut self, frame: &Frame) -> Result<Vec<Detection>> {
+        let (fw, fh) = frame.image.dimensions();
+        if self.model.is_none() {
+            self.model = Some(self.init_model(fw, fh)?);
+        }
+        let (w, h) = match &self.model {
+            Some(m) if (m.frame_w, m.frame_h) != (fw, fh) => {
+                return Err(VideoError::Image {
+                    path: PathBuf::from(format!("frame {}", frame.index)),
+                    message: format!(
+                        "frame size changed from {}x{} to {fw}x{fh}",
+                        m.frame_w, m.frame_h
+                    ),
+                })
+            }
+            Some(m) => (m.w, m.h),
+            None => return Ok(Vec::new()),
+        };
+        self.downscale(&frame.image, w, h)?;
+        self.frames_seen += 1;
+        let config = self.config.clone();
+        let Some(model) = self.model.as_mut() else {
+            return Ok(Vec::new());
+        };
+        if !model.ready {
+            let spacing = config.warmup_s / config.warmup_frames.max(1) as f64;
+            let keep = model
+                .warm_last_s
+                .is_none_or(|t| frame.time_s - t >= spacing - 1e-9);
+            if keep {
+                model.warm.push(self.work.clone());
+                model.warm_last_s = Some(frame.time_s);
+            }
+            if !keep || model.warm.len() < config.warmup_frames.max(1) {
+                return Ok(Vec::new());
+            }
+            init_background(model);
+        }
+        let n = w as usize * h as usize;
+        let dt = model.last_time_s.map_or(0.0, |t| {
+            (frame.time_s - t).clamp(0.0, 10.0 * config.foreground_time_s)
+        });
+        model.last_time_s = Some(frame.time_s);
+        // Global brightness compensation: the camera's exposure and white balance drift (and
+        // jump when a large bright vehicle enters); the per-channel median difference between
+        // frame and background over the road measures that drift and is removed.
+        let mut offset = [0f32; 3];
+        {
+            let mut diffs: Vec<f32> = Vec::with_capacity(n);
+            for (ch, o) in offset.iter_mut().enumerate() {
+                diffs.clear();
+                for i in 0..n {
+                    if model.mask.as_ref().is_some_and(|m| !m[i]) {
+                        continue;
+                    }
+                    diffs.push(f32::from(self.work[3 * i + ch]) - model.bg[3 * i + ch]);
+                }
+                *o = median(&mut diffs);
+            }
+        }
+        for px in model.bg.chunks_exact_mut(3) {
+            for (b, o) in px.iter_mut().zip(offset) {
+                *b += o;
+            }
+        }
+        let mut dists = vec![f32::NAN; n];
+        let mut road_d = Vec::with_capacity(n);
+        for (i, d) in dists.iter_mut().enumerate() {
+            if model.mask.as_ref().is_some_and(|m| !m[i]) {
+                continue;
+            }
+            *d = dist(&self.work[3 * i..3 * i + 3], &model.bg[3 * i..3 * i + 3]);
+            road_d.push(*d);
+        }
+        let road_count = road_d.len();
+        let noise = median(&mut road_d);
+        let threshold = config.min_difference.max(config.noise_factor * noise);
+        let mut fg = GrayImage::new(w, h);
+        let mut fg_count = 0usize;
+        {
+            let fgbuf: &mut [u8] = &mut fg;
+            for (i, &d) in dists.iter().enumerate() {
+                // NaN (outside the mask) compares false.
+                if d > threshold
+                    && !is_shadow(
+                        &self.work[3 * i..3 * i + 3],
+                        &model.bg[3 * i..3 * i + 3],
+                        &config,
+                    )
+                {
+                    fgbuf[i] = 255;
+                    fg_count += 1;
+                }
+            }
+        }
+        if road_count > 0 && fg_count as f64 > config.max_foreground_frac * road_count as f64 {
+            // A global change: start over from this frame.
+            for (b, &p) in model.bg.iter_mut().zip(self.work.iter()) {
+                *b = f32::from(p);
+            }
+            model.prev = Some(self.work.clone());
+            return Ok(Vec::new());
+        }
+        // Pixels that changed since the previous frame.
+        let moved: Vec<bool> = match &model.prev {
+            Some(prev) => (0..n)
+                .map(|i| {
+                    let a = &self.work[3 * i..3 * i + 3];
+                    let b = &prev[3 * i..3 * i + 3];
+                    let d: f32 = (0..3)
+                        .map(|c| (f32::from(a[c]) - f32::from(b[c])).powi(2))
+                        .sum::<f32>()
+                        .sqrt();
+                    d > threshold
+                })
+                .collect(),
+            None => vec![true; n],
+        };
+        if config.open_radius > 0 {
+            imageproc::morphology::open_mut(&mut fg, Norm::LInf, config.open_radius);
+        }
+        if config.close_radius > 0 {
+            imageproc::morphology::close_mut(&mut fg, Norm::LInf, config.close_radius);
+            // The closing may grow blobs into the masked-out area; cut them back.
+            if let Some(m) = &model.mask {
+                for (v, &road) in fg.iter_mut().zip(m.iter()) {
+                    if !road {
+                        *v = 0;
+                    }
+                }
+            }
+        }
+        let (labels, blobs) = find_blobs(&fg, &moved);
+        // Per component: does it move? Static components (ghosts, stopped vehicles) are
+        // absorbed at the background rate and not reported.
+        let max_label = blobs.iter().map(|b| b.label).max().unwrap_or(0);
+        let mut slow_update = vec![false; max_label + 1];
+        for b in &blobs {
+            slow_update[b.label] = b.is_moving(config.min_moving_frac);
+        }
+        let boxes = select_boxes(blobs, w, h, &config);
+        let slow: Vec<bool> = labels
+            .iter()
+            .map(|&l| slow_update.get(l as usize).copied().unwrap_or(false))
+            .collect();
+        update_background(model, &self.work, &slow, &config, dt);
+        model.prev = Some(self.work.clone());
+        self.last_foreground = Some(fg);
+        let sx = f64::from(fw) / f64::from(w);
+        let sy = f64::from(fh) / f64::from(h);
+        Ok(boxes
+            .into_iter()
+            .map(|(b, score)| Detection {
+                bbox: BoxPx::new(
+                    f64::from(b.x0) * sx,
+                    f64::from(b.y0) * sy,
+                    (f64::from(b.x1 + 1) * sx).min(f64::from(fw)),
+                    (f64::from(b.y1 + 1) * sy).min(f64::from(fh)),
+                ),
+                score,
+            })
+            .collect())
+    }
+}
+
+fn resize_error(e: &dyn std::fmt::Display) -> VideoError {
+    VideoError::Image {
+        path: PathBuf::from("frame"),
+        message: format!("cannot resize frame ({e})"),
+    }
+}
+
+fn resize_mask(m: &GrayImage, path: &Path, fw: u32, fh: u32, w: u32, h: u32) -> Result<Vec<bool>> {
+    let frame_aspect = f64::from(fw) / f64::from(fh);
+    let mask_aspect = f64::from(m.width()) / f64::from(m.height().max(1));
+    if (frame_aspect / mask_aspect - 1.0).abs() > 0.01 {
+        return Err(VideoError::Image {
+            path: path.to_path_buf(),
+            message: format!(
+                "road mask is {}x{} but the frames are {fw}x{fh} (the aspect ratios differ)",
+                m.width(),
+                m.height()
+            ),
+        });
+    }
+    let resized = image::imageops::resize(m, w, h, image::imageops::FilterType::Triangle);
+    let mask: Vec<bool> = resized.pixels().map(|p| p[0] >= 128).collect();
+    if !mask.iter().any(|&v| v) {
+        return Err(VideoError::Image {
+            path: path.to_path_buf(),
+            message: "road mask has no white (road) pixel".into(),
+        });
+    }
+    Ok(mask)
+}
+
+/// The median (the upper one for an even count; 0 for none). Reorders `v`.
+fn median(v: &mut [f32]) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f32::total_cmp).1
+}
+
+fn init_background(model: &mut Model) {
+    let n = model.w as usize * model.h as usize;
+    let k = model.warm.len();
+    let mut samples = vec![0f32; k];
+    for i in 0..n {
+        for c in 0..3 {
+            for (s, f) in samples.iter_mut().zip(&model.warm) {
+                *s = f32::from(f[3 * i + c]);
+            }
+            model.bg[3 * i + c] = median(&mut samples);
+        }
+    }
+    model.warm = Vec::new();
+    model.ready = true;
+}
+
+fn dist(px: &[u8], bg: &[f32]) -> f32 {
+    let d0 = f32::from(px[0]) - bg[0];
+    let d1 = f32::from(px[1]) - bg[1];
+    let d2 = f32::from(px[2]) - bg[2];
+    (d0 * d0 + d1 * d1 + d2 * d2).sqrt()
+}
+
+/// True when pixel `px` looks like a cast shadow on background `bg` (see the module docs).
+fn is_shadow(px: &[u8], bg: &[f32], c: &MotionConfig) -> bool {
+    if !c.shadow_suppression {
+        return false;
+    }
+    let bb = bg[0] * bg[0] + bg[1] * bg[1] + bg[2] * bg[2];
+    if bb.sqrt() < SHADOW_MIN_BACKGROUND {
+        return false;
+    }
+    let p = [f32::from(px[0]), f32::from(px[1]), f32::from(px[2])];
+    let a = (p[0] * bg[0] + p[1] * bg[1] + p[2] * bg[2]) / bb;
+    if a < c.shadow_brightness.0 || a > c.shadow_brightness.1 {
+        return false;
+    }
+    let e0 = p[0] - a * bg[0];
+    let e1 = p[1] - a * bg[1];
+    let e2 = p[2] - a * bg[2];
+    let distortion = (e0 * e0 + e1 * e1 + e2 * e2).sqrt() / (a * bb.sqrt()).max(1.0);
+    distortion < c.shadow_chroma
+}
+
+/// `slow[i]`: pixel `i` belongs to a moving blob and is updated at the foreground rate.
+fn update_background(model: &mut Model, work: &[u8], slow: &[bool], c: &MotionConfig, dt: f64) {
+    // Why: rates in [0, 1] computed in f64, used in f32 arithmetic.
+    let rate_bg = (1.0 - (-dt / c.background_time_s).exp()) as f32;
+    let rate_fg = (1.0 - (-dt / c.foreground_time_s).exp()) as f32;
+    for (i, &f) in slow.iter().enumerate() {
+        let rate = if f { rate_fg } else { rate_bg };
+        for ch in 0..3 {
+            let b = &mut model.bg[3 * i + ch];
+            *b += rate * (f32::from(work[3 * i + ch]) - *b);
+        }
+    }
+}
+
+/// An axis-aligned blob box in working pixels, inclusive bounds, with its pixel count.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Blob {
+    x0: u32,
+    y0: u32,
+    x1: u32,
+    y1: u32,
+    /// Foreground pixels.
+    count: u64,
+    /// Foreground pixels that changed since the previous frame.
+    moving: u64,
+    /// Component label (of the first component, for merged blobs).
+    label: usize,
+}
+
+impl Blob {
+    fn is_moving(&self, min_frac: f64) -> bool {
+        self.moving as f64 >= min_frac * self.count as f64
+    }
+
+    fn area(&self) -> u64 {
+        u64::from(self.x1 - self.x0 + 1) * u64::from(self.y1 - self.y0 + 1)
+    }
+
+    /// Gap between two boxes (0 when they touch or overlap), in pixels, Chebyshev.
+    fn gap(&self, o: &Blob) -> u32 {
+        let gx = if o.x0 > self.x1 {
+            o.x0 - self.x1 - 1
+        } else if self.x0 > o.x1 {
+            self.x0 - o.x1 - 1
+        } else {
+            0
+        };
+        let gy = if o.y0 > self.y1 {
+            o.y0 - self.y1 - 1
+        } else if self.y0 > o.y1 {
+            self.y0 - o.y1 - 1
+        } else {
+            0
+        };
+        gx.max(gy)
+    }
+
+    fn merge(&mut self, o: &Blob) {
+        self.x0 = self.x0.min(o.x0);
+        self.y0 = self.y0.min(o.y0);
+        self.x1 = self.x1.max(o.x1);
+        self.y1 = self.y1.max(o.y1);
+        self.count += o.count;
+        self.moving += o.moving;
+    }
+}
+
+/// Connected components of `fg` (8-connected): the label image and one blob per label.
+fn find_blobs(fg: &GrayImage, moved: &[bool]) -> (Vec<u32>, Vec<Blob>) {
+    let labels = connected_components(fg, Connectivity::Eight, Luma([0u8]));
+    let mut blobs: Vec<Option<Blob>> = Vec::new();
+    for (i, (x, y, l)) in labels.enumerate_pixels().enumerate() {
+        let l = l[0] as usize;
+        if l == 0 {
+            continue;
+        }
+        if blobs.len() <= l {
+            blobs.resize(l + 1, None);
+        }
+        let m = u64::from(moved.get(i).copied().unwrap_or(true));
+        match &mut blobs[l] {
+            Some(b) => {
+                b.x0 = b.x0.min(x);
+                b.y0 = b.y0.min(y);
+                b.x1 = b.x1.max(x);
+                b.y1 = b.y1.max(y);
+                b.count += 1;
+                b.moving += m;
+            }
+            slot @ None => {
+                *slot = Some(Blob {
+                    x0: x,
+                    y0: y,
+                    x1: x,
+                    y1: y,
+                    count: 1,
+                    moving: m,
+                    label: l,
+                });
+            }
+        }
+    }
+    (labels.into_raw(), blobs.into_iter().flatten().collect())
+}
+
+/// Merges nearby blobs and keeps those that look like vehicles, with their scores.
+fn select_boxes(mut blobs: Vec<Blob>, w: u32, h: u32, c: &MotionConfig) -> Vec<(Blob, f32)> {
+    // Tiny specks cannot become vehicles even after merging; skip them to bound the work.
+    blobs.retain(|b| b.count >= 3);
+    if blobs.len() > 400 {
+        blobs.sort_by_key(|b| std::cmp::Reverse(b.count));
+        blobs.truncate(400);
+    }
+    // Why: a small non-negative number of pixels.
+    let gap = (c.merge_gap_frac * f64::from(w)).round().max(0.0) as u32;
+    let mut merged = true;
+    while merged {
+        merged = false;
+        'outer: for i in 0..blobs.len() {
+            for j in i + 1..blobs.len() {
+                if blobs[i].gap(&blobs[j]) <= gap {
+                    let o = blobs.swap_remove(j);
+                    blobs[i].merge(&o);
+                    merged = true;
+                    break 'outer;
+                }
+            }
+        }
+    }
+    let frame_area = f64::from(w) * f64::from(h);
+    let min_area = c.min_area_frac * frame_area;
+    let mut out = Vec::new();
+    for b in blobs {
+        let area = b.area() as f64;
+        let bw = f64::from(b.x1 - b.x0 + 1);
+        let bh = f64::from(b.y1 - b.y0 + 1);
+        if area < min_area || area > c.max_area_frac * frame_area {
+            continue;
+        }
+        if bw > c.max_side_frac * f64::from(w) || bh > c.max_side_frac * f64::from(h) {
+            continue;
+        }
+        if bw.max(bh) > c.max_aspect * bw.min(bh) {
+            continue;
+        }
+        if !b.is_moving(c.min_moving_frac) {
+            continue;
+        }
+        let fill = (b.count as f64 / area).min(1.0);
+        if fill < c.min_fill {
+            continue;
+        }
+        if c.drop_at_frame_edge && (b.x0 == 0 || b.y0 == 0 || b.x1 + 1 >= w || b.y1 + 1 >= h) {
+            continue;
+        }
+        let size_factor = if min_area > 0.0 {
+            (0.25 + 0.75 * (area - min_area) / (3.0 * min_area)).clamp(0.25, 1.0)
+        } else {
+            1.0
+        };
+        // Why: a product of two numbers in [0, 1].
+        out.push((b, (fill * size_factor) as f32));
+    }
+    out
+}
+
+impl Detector for MotionDetector {
+    fn detect(&mut self, frame: &Frame) -> Result<Vec<Detection>> {
+        self.process(frame)
+    }
+
+    fn name(&self) -> String {
+        "motion".to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn blob(x0: u32, y0: u32, x1: u32, y1: u32) -> Blob {
+        Blob {
+            x0,
+            y0,
+            x1,
+            y1,
+            count: u64::from((x1 - x0 + 1) * (y1 - y0 + 1)),
+            moving: u64::from((x1 - x0 + 1) * (y1 - y0 + 1)),
+            label: 1,
+        }
+    }
+
+    #[test]
+    fn blob_gap_is_chebyshev_between_boxes() {
+        assert_eq!(blob(0, 0, 4, 4).gap(&blob(5, 0, 9, 4)), 0);
+        assert_eq!(blob(0, 0, 4, 4).gap(&blob(8, 0, 9, 4)), 3);
+        assert_eq!(blob(0, 0, 4, 4).gap(&blob(2, 2, 3, 3)), 0);
+        assert_eq!(blob(10, 10, 14, 14).gap(&blob(0, 0, 4, 5)), 5);
+    }
+
+    #[test]
+    fn nearby_fragments_merge_and_size_limits_apply() {
+        let c = MotionConfig {
+            merge_gap_frac: 0.02, // 2 px at width 100
+            min_area_frac: 0.001, // 10 px
+            ..MotionConfig::default()
+        };
+        let out = select_boxes(
+            vec![
+                blob(10, 10, 19, 19),
+                blob(21, 10, 30, 19),
+                blob(60, 60, 61, 61),
+            ],
+            100,
+            100,
+            &c,
+        );
+        assert_eq!(out.len(), 1, "{out:?}");
+        assert_eq!((out[0].0.x0, out[0].0.x1), (10, 30));
+        assert!(out[0].1 > 0.9);
+    }
+
+    #[test]
+    fn shadows_are_darker_copies_of_the_background() {
+        let c = MotionConfig::default();
+        let bg = [120.0, 140.0, 160.0];
+        // A shadow: 60 % of the background, same colour.
+        assert!(is_shadow(&[72, 84, 96], &bg, &c));
+        // A red car: large colour distortion.
+        assert!(!is_shadow(&[200, 30, 30], &bg, &c));
+        // A dark car: much darker than a shadow.
+        assert!(!is_shadow(&[20, 22, 25], &bg, &c));
+        // Brighter than the background: never a shadow.
+        assert!(!is_shadow(&[160, 180, 200], &bg, &c));
+        let no_shadow = MotionConfig {
+            shadow_suppression: false,
+            ..c
+        };
+        assert!(!is_shadow(&[72, 84, 96], &bg, &no_shadow));
+    }
+}
