@@ -5,14 +5,17 @@
 //!
 //! ```text
 //! ffmpeg -nostdin -hide_banner -loglevel error -noautorotate [-ss T] -i FILE -map 0:v:0 -an -sn -dn
-//!        -vf select=...,setpts=N -fps_mode passthrough [-frames:v N] -f rawvideo -pix_fmt rgb24 pipe:1
+//!        -vf select=...,setpts=N/(FRAME_RATE*TB) -fps_mode passthrough [-frames:v N] -f rawvideo -pix_fmt rgb24 pipe:1
 //! ```
 //!
 //! - `-fps_mode passthrough` keeps FFmpeg from duplicating or dropping frames to fit a frame
 //!   rate, so the k-th frame on the pipe is the k-th decoded frame.
 //! - `select` implements `start` (frame) and `every` inside FFmpeg, so skipped frames are never
-//!   converted to RGB or copied through the pipe; `setpts=N` gives the raw muxer monotonic
-//!   timestamps (variable-frame-rate files otherwise make it log spurious errors).
+//!   converted to RGB or copied through the pipe; `setpts=N/(FRAME_RATE*TB)` gives the output
+//!   frames evenly spaced timestamps, one nominal frame interval apart (otherwise the raw
+//!   muxer logs spurious "non monotonically increasing dts" errors for variable-frame-rate
+//!   files and after selection; such lines, should they still appear, are not counted as
+//!   damage).
 //! - `-noautorotate`: frames come in the stored orientation, the size `ffprobe` reports.
 //! - stderr is drained by a thread into a bounded log; any line there is an error (we ask for
 //!   `-loglevel error`) and is handled by [`DecodeErrors`].
@@ -265,7 +268,7 @@ impl FfmpegSource {
             (s, 1) => filters.push(format!("select=gte(n\\,{s})")),
             (s, k) => filters.push(format!("select=gte(n\\,{s})*not(mod(n-{s}\\,{k}))")),
         }
-        filters.push("setpts=N".to_string());
+        filters.push("setpts=N/(FRAME_RATE*TB)".to_string());
         cmd.arg("-vf").arg(filters.join(","));
         cmd.args(["-fps_mode", "passthrough"]);
         if let Some(n) = options.max_frames {
@@ -291,7 +294,8 @@ impl FfmpegSource {
                 for line in reader.split(b'\n') {
                     let Ok(line) = line else { break };
                     let line = String::from_utf8_lossy(&line).trim().to_string();
-                    if line.is_empty() {
+                    // Timestamp complaints of the raw muxer say nothing about the pictures.
+                    if line.is_empty() || line.contains("non monotonically increasing dts") {
                         continue;
                     }
                     if let Ok(mut log) = log.lock() {
