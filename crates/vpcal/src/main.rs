@@ -30,6 +30,13 @@ enum Command {
     /// Synthetic data: training crops, traffic scenes with ground truth, benchmark suite.
     #[command(subcommand)]
     Synth(cmd::synth::SynthCommand),
+    /// Train the VP network (or a regression baseline) with checkpoints and exact resume.
+    Train(cmd::train::Args),
+    /// Predict the VPs of vehicle crops with trained weights; writes heatmap PNGs.
+    Predict(cmd::predict::Args),
+    /// Throughput of the VP network, optionally against PyTorch (developer tool).
+    #[command(hide = true)]
+    BenchNet(cmd::bench_net::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -39,6 +46,9 @@ fn main() -> std::process::ExitCode {
         Command::Data(args) => cmd::data::run(args),
         Command::Eval(args) => cmd::eval::run(args),
         Command::Synth(args) => cmd::synth::run(args),
+        Command::Train(args) => cmd::train::run(args),
+        Command::Predict(args) => cmd::predict::run(args),
+        Command::BenchNet(args) => cmd::bench_net::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,207 @@
+//! What the trainer needs from a network: the [`VpNetwork`] trait, implemented by the heatmap
+//! model ([`StackedHourglass`]) and the regression baselines
+//! ([`Regressor`](crate::regression::Regressor)).
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use vpcal_data::Batch;
+use vpcal_geom::heatmap::{DecodeMode, HeatmapCodec};
+use vpcal_geom::Point2;
+
+use crate::config::ModelConfig;
+use crate::metrics::VpErrorAccumulator;
+use crate::model::StackedHourglass;
+use crate::NetError;
+
+/// A trainable VP network with a serialisable config.
+pub trait VpNetwork: Module + Clone + core::fmt::Debug + 'static {
+    /// The config saved with every checkpoint.
+    type Config: Serialize + DeserializeOwned + Clone + core::fmt::Debug + PartialEq;
+
+    /// Short name of the architecture, stored in checkpoints (`stacked_hourglass`, ...).
+    const KIND: &'static str;
+
+    /// Check the config.
+    ///
+    /// # Errors
+    /// [`NetError::Config`] naming the offending field.
+    fn validate_config(config: &Self::Config) -> Result<(), NetError>;
+
+    /// A freshly initialised network.
+    fn init(config: &Self::Config, device: &Device) -> Self;
+
+    /// Input crop side, pixels.
+    fn input_size(config: &Self::Config) -> usize;
+
+    /// The codec of the heatmap targets the batches must carry (regression models ignore
+    /// targets and ask for a small one).
+    fn target_codec(config: &Self::Config) -> HeatmapCodec;
+
+    /// Number of parameters, batch-norm running statistics included.
+    fn param_count(&self) -> usize {
+        self.num_params()
+    }
+
+    /// Check that a batch fits this network (input size, target layout).
+    ///
+    /// # Errors
+    /// [`NetError::Input`] naming the mismatching field with both values.
+    fn check_batch(config: &Self::Config, batch: &Batch) -> Result<(), NetError>;
+
+    /// The loss terms of a batch, `[terms]` (their sum is minimised); for the heatmap model one
+    /// MSE per stack.
+    ///
+    /// # Shapes
+    /// - `images`: `[batch, 3, input, input]`
+    /// - output: `[terms]`
+    fn loss_terms(&self, config: &Self::Config, images: Tensor<4>, batch: &Batch) -> Tensor<1>;
+
+    /// Validation on a batch with a validation-mode network (`Module::valid`): returns the
+    /// loss terms and adds the VP errors to `acc`.
+    ///
+    /// # Errors
+    /// [`NetError::Tensor`] when an output cannot be read back.
+    fn evaluate(
+        &self,
+        config: &Self::Config,
+        images: Tensor<4>,
+        batch: &Batch,
+        acc: &mut VpErrorAccumulator,
+    ) -> Result<Vec<f32>, NetError>;
+}
+
+/// Batch images as a tensor on `device`.
+///
+/// # Errors
+/// [`NetError::Input`] when `images.len()` does not match `size * 3 * input * input`.
+pub fn images_tensor(batch: &Batch, device: &Device) -> Result<Tensor<4>, NetError> {
+    let (n, s) = (batch.size, batch.input_size);
+    if batch.images.len() != n * 3 * s * s {
+        return Err(NetError::Input(format!(
+            "batch images hold {} values, expected size {n} x 3 x {s} x {s} = {}",
+            batch.images.len(),
+            n * 3 * s * s
+        )));
+    }
+    Ok(Tensor::from_data(
+        TensorData::new(batch.images.clone(), [n, 3, s, s]),
+        device,
+    ))
+}
+
+/// Read a float tensor back as f32 values.
+///
+/// # Errors
+/// [`NetError::Tensor`] when the data cannot be converted.
+pub fn to_vec<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, NetError> {
+    t.into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .map_err(|e| NetError::Tensor(format!("{e:?}")))
+}
+
+/// MSE of every stack's heatmaps against the targets, `[stacks]`.
+fn heatmap_losses(outs: Vec<Tensor<4>>, targets: Tensor<4>) -> Tensor<1> {
+    let terms: Vec<Tensor<1>> = outs
+        .into_iter()
+        .map(|o| (o - targets.clone()).square().mean()) // [1]
+        .collect();
+    Tensor::cat(terms, 0) // [stacks]
+}
+
+fn targets_tensor(batch: &Batch, device: &Device) -> Tensor<4> {
+    let r = batch.heatmap_res;
+    Tensor::from_data(
+        TensorData::new(batch.targets.clone(), [batch.size, batch.channels, r, r]),
+        device,
+    )
+}
+
+impl VpNetwork for StackedHourglass {
+    type Config = ModelConfig;
+    const KIND: &'static str = "stacked_hourglass";
+
+    fn validate_config(config: &ModelConfig) -> Result<(), NetError> {
+        config.validate()
+    }
+
+    fn init(config: &ModelConfig, device: &Device) -> Self {
+        StackedHourglass::new(config, device)
+    }
+
+    fn input_size(config: &ModelConfig) -> usize {
+        config.input_size
+    }
+
+    fn target_codec(config: &ModelConfig) -> HeatmapCodec {
+        config.codec()
+    }
+
+    fn check_batch(config: &ModelConfig, batch: &Batch) -> Result<(), NetError> {
+        let checks = [
+            ("input_size", batch.input_size, config.input_size),
+            ("heatmap_res", batch.heatmap_res, config.heatmap_size),
+            ("channels", batch.channels, config.outputs()),
+        ];
+        for (name, got, want) in checks {
+            if got != want {
+                return Err(NetError::Input(format!(
+                    "batch {name} is {got}, the model expects {want}"
+                )));
+            }
+        }
+        let r = config.heatmap_size;
+        if batch.targets.len() != batch.size * config.outputs() * r * r
+            || batch.vp1_box.len() != batch.size
+            || batch.vp2_box.len() != batch.size
+        {
+            return Err(NetError::Input(format!(
+                "batch of {} crops holds {} target values, {} VP1s and {} VP2s (expected {}, {}, {})",
+                batch.size,
+                batch.targets.len(),
+                batch.vp1_box.len(),
+                batch.vp2_box.len(),
+                batch.size * config.outputs() * r * r,
+                batch.size,
+                batch.size
+            )));
+        }
+        Ok(())
+    }
+
+    fn loss_terms(&self, _config: &ModelConfig, images: Tensor<4>, batch: &Batch) -> Tensor<1> {
+        let device = images.device();
+        let targets = targets_tensor(batch, &device); // [b, k, r, r]
+        heatmap_losses(self.forward(images), targets)
+    }
+
+    fn evaluate(
+        &self,
+        config: &ModelConfig,
+        images: Tensor<4>,
+        batch: &Batch,
+        acc: &mut VpErrorAccumulator,
+    ) -> Result<Vec<f32>, NetError> {
+        let device = images.device();
+        let targets = targets_tensor(batch, &device);
+        let outs = self.forward(images);
+        let last = outs.last().cloned();
+        let terms = to_vec(heatmap_losses(outs, targets))?;
+        if let Some(last) = last {
+            let heat = to_vec(last)?;
+            let codec = config.codec();
+            let per = codec.channels() * codec.resolution * codec.resolution;
+            for (i, chunk) in heat.chunks_exact(per).enumerate() {
+                let pred = codec.decode(chunk, DecodeMode::Centre);
+                acc.add(
+                    &pred,
+                    Point2::from(batch.vp1_box[i]),
+                    Point2::from(batch.vp2_box[i]),
+                );
+            }
+        }
+        Ok(terms)
+    }
+}

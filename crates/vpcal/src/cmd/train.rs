@@ -1,0 +1,318 @@
+//! `vpcal train`: train the VP network (or a regression baseline) on a data source, with
+//! per-epoch validation, checkpoints, metrics and curves in `--out` (crate `vpcal-net`).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args as ClapArgs, ValueEnum};
+use vpcal_data::augment::AugmentConfig;
+use vpcal_data::{SampleSource, Split};
+use vpcal_geom::heatmap::HeatmapCodec;
+use vpcal_net::regression::{NormLoss, RegressionConfig, Regressor};
+use vpcal_net::train::EpochRecord;
+use vpcal_net::{
+    BatchSource, LrSchedule, ModelConfig, PipelineSource, StackedHourglass, ToySource, TrainConfig,
+    Trainer, VpNetwork,
+};
+
+/// Which network to train.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Arch {
+    /// The paper's stacked hourglass with diamond-space heatmaps.
+    Heatmap,
+    /// Ablation: ResNet-50 regressing the VPs with a normalised loss.
+    Resnet50,
+    /// Ablation: stacked hourglass + global pooling regressing the VPs.
+    HourglassPool,
+}
+
+/// Normalised regression loss (regression architectures only).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LossArg {
+    Nl1,
+    Nl2,
+}
+
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// Training data: `boxcars:DIR` (BoxCars116k), `synth:N` (N synthetic crops rendered on
+    /// the fly), `synth-crops:DIR` (crops written by `vpcal synth crops`), `toy:N` (N toy crops
+    /// of line segments, a smoke test). Defaults to the run's own source with --resume.
+    #[arg(long, value_name = "KIND:ARG")]
+    pub data: Option<String>,
+    /// Run folder: checkpoints, metrics.csv/jsonl, curves.png.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Continue the run in --out from its latest checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// Model size: `paper` (DESIGN.md §5) or `tiny` (CPU training and tests).
+    #[arg(long, default_value = "paper")]
+    pub preset: String,
+    /// Network architecture.
+    #[arg(long, value_enum, default_value_t = Arch::Heatmap)]
+    pub arch: Arch,
+    /// Loss of the regression architectures.
+    #[arg(long, value_enum, default_value_t = LossArg::Nl1)]
+    pub loss: LossArg,
+    /// Epochs (default 75 = the paper's 60 + 15). The learning rate is --lr for the first
+    /// 80 % of the epochs and --lr / 10 after (the paper's schedule). With --resume, a new
+    /// total recomputes that schedule from the run's first rate.
+    #[arg(long)]
+    pub epochs: Option<usize>,
+    /// Base learning rate (Adam).
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Keep --lr for all epochs instead of dropping it for the last 20 %.
+    #[arg(long)]
+    pub constant_lr: bool,
+    /// Crops per step.
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    /// Seed of the initialisation, the data order and the augmentation.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Augmentation of training crops: `paper`, `reference` or `none`.
+    #[arg(long, default_value = "paper")]
+    pub augment: String,
+    /// Stop each epoch after this many batches (quick runs on large data).
+    #[arg(long)]
+    pub max_batches: Option<usize>,
+    /// Validate on at most this many batches.
+    #[arg(long)]
+    pub max_val_batches: Option<usize>,
+    /// Data pipeline threads (default: one per core).
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// Epoch checkpoints to keep.
+    #[arg(long, default_value_t = 2)]
+    pub keep: usize,
+    /// Device: `cpu`, or `wgpu` in builds with the `wgpu` feature.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Build the batch source named by `spec` for a model with `input_size` and `codec`.
+fn open_data(
+    spec: &str,
+    input_size: usize,
+    codec: HeatmapCodec,
+    augment: &str,
+    seed: u64,
+    workers: Option<usize>,
+) -> Result<Box<dyn BatchSource>> {
+    let Some((kind, arg)) = spec.split_once(':') else {
+        bail!("--data {spec:?}: expected KIND:ARG, e.g. boxcars:/data/BoxCars116k or toy:256");
+    };
+    let count = |what: &str| -> Result<usize> {
+        arg.parse::<usize>()
+            .ok()
+            .filter(|n| *n > 0)
+            .with_context(|| format!("--data {spec:?}: {what} needs a positive sample count"))
+    };
+    let aug = AugmentConfig::preset(augment).with_context(|| {
+        format!(
+            "unknown --augment {augment:?}: expected one of {}",
+            AugmentConfig::PRESETS.join(", ")
+        )
+    })?;
+    let pipeline = |train: Arc<dyn SampleSource>,
+                    val: Arc<dyn SampleSource>|
+     -> Result<Box<dyn BatchSource>> {
+        let mut p = PipelineSource::new(
+            spec,
+            train,
+            Some(val),
+            aug.clone(),
+            input_size,
+            codec.clone(),
+            seed,
+        )?;
+        if let Some(w) = workers {
+            p = p.with_workers(w);
+        }
+        Ok(Box::new(p))
+    };
+    match kind {
+        "toy" => {
+            let n = count("toy")?;
+            Ok(Box::new(ToySource::new(n, (n / 8).max(8), seed, input_size, codec)))
+        }
+        "boxcars" => pipeline(
+            super::data::open_source(spec, Split::Train)?,
+            super::data::open_source(spec, Split::Validation)?,
+        ),
+        "synth" => {
+            let n = count("synth")?;
+            let generator = vpcal_synth::CropGenerator::new(
+                vpcal_synth::CropConfig::default(),
+                seed,
+                Arc::new(Vec::new()),
+            )?;
+            let train = vpcal_synth::SynthCropSource::new(generator.clone(), Split::Train, n);
+            let val = vpcal_synth::SynthCropSource::new(generator, Split::Validation, (n / 8).max(8));
+            pipeline(Arc::new(train), Arc::new(val))
+        }
+        "synth-crops" => {
+            let dir = Path::new(arg);
+            let train = vpcal_synth::CropDirSource::open(dir, Split::Train)
+                .with_context(|| format!("opening synthetic crops in {}", dir.display()))?;
+            let val = vpcal_synth::CropDirSource::open(dir, Split::Validation)
+                .with_context(|| format!("opening synthetic crops in {}", dir.display()))?;
+            pipeline(Arc::new(train), Arc::new(val))
+        }
+        other => bail!(
+            "--data {spec:?}: unknown data kind {other:?} (supported: boxcars, synth, synth-crops, toy)"
+        ),
+    }
+}
+
+fn fmt_err(v: f64) -> String {
+    if v.is_finite() {
+        format!("{:.2} %", 100.0 * v)
+    } else {
+        "inf".to_string()
+    }
+}
+
+fn print_epoch(r: &EpochRecord, total: usize) {
+    let mut line = format!(
+        "epoch {}/{total}: lr {:.0e}, train loss {:.4e}",
+        r.epoch, r.lr, r.train_loss
+    );
+    if let Some(v) = r.val_loss {
+        line.push_str(&format!(", val loss {v:.4e}"));
+    }
+    if let Some(m) = &r.val {
+        line.push_str(&format!(
+            ", median rel. VP error VP1 {} VP2 {}",
+            fmt_err(m.vp1_median_rel),
+            fmt_err(m.vp2_median_rel)
+        ));
+    }
+    line.push_str(&format!(
+        ", {:.1} crops/s, {:.0} s",
+        r.samples_per_s, r.seconds
+    ));
+    println!("{line}");
+}
+
+fn train_loop<N: VpNetwork>(mut trainer: Trainer<N>, source: &dyn BatchSource) -> Result<()> {
+    let total = trainer.config().schedule.total_epochs();
+    while trainer.state().epochs_done < total {
+        let r = trainer
+            .run_epoch(source)
+            .with_context(|| format!("training epoch {}", trainer.state().epochs_done + 1))?;
+        print_epoch(&r, total);
+    }
+    println!(
+        "done: {} epochs in {}; metrics in {}, curves in {}",
+        total,
+        trainer.out_dir().display(),
+        trainer.out_dir().join("metrics.csv").display(),
+        trainer.out_dir().join("curves.png").display()
+    );
+    Ok(())
+}
+
+fn schedule(a: &Args, epochs: usize, lr: f64) -> LrSchedule {
+    if a.constant_lr {
+        LrSchedule::constant(epochs, lr)
+    } else {
+        LrSchedule::two_phase(epochs, lr)
+    }
+}
+
+fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
+    let device = vpcal_net::device::select(&a.device)?;
+    let (trainer, source) = if a.resume {
+        let mut t = Trainer::<N>::resume(&a.out, &device)
+            .with_context(|| format!("resuming the run in {}", a.out.display()))?;
+        if let Some(e) = a.epochs {
+            let base = t.config().schedule.lr_at(0);
+            t.set_schedule(schedule(a, e, base))?;
+        }
+        // The data of a resumed run is the one it was started with (same seed, so the same
+        // batches per epoch), unless --data overrides it.
+        let saved = t.config().data.clone();
+        let (spec, augment) = match (&a.data, saved.split_once(" augment=")) {
+            (Some(d), _) => (d.clone(), a.augment.clone()),
+            (None, Some((d, aug))) => (d.to_string(), aug.to_string()),
+            (None, None) => (saved.clone(), a.augment.clone()),
+        };
+        let model = &t.config().model;
+        let source = open_data(
+            &spec,
+            N::input_size(model),
+            N::target_codec(model),
+            &augment,
+            t.config().seed,
+            a.workers,
+        )?;
+        (t, source)
+    } else {
+        let Some(data) = &a.data else {
+            bail!("--data is required for a new run (e.g. --data toy:256)");
+        };
+        // Open the data first: a bad --data leaves no half-made run folder behind.
+        let source = open_data(
+            data,
+            N::input_size(&model),
+            N::target_codec(&model),
+            &a.augment,
+            a.seed,
+            a.workers,
+        )?;
+        let mut tc = TrainConfig::new::<N>(model);
+        tc.batch_size = a.batch;
+        tc.schedule = schedule(a, a.epochs.unwrap_or(75), a.lr);
+        tc.seed = a.seed;
+        tc.max_train_batches = a.max_batches;
+        tc.max_val_batches = a.max_val_batches;
+        tc.data = format!("{data} augment={}", a.augment);
+        tc.keep_checkpoints = a.keep.max(1);
+        let t = Trainer::<N>::new(tc, &a.out, &device)
+            .with_context(|| format!("starting a run in {}", a.out.display()))?;
+        (t, source)
+    };
+    let trainer = trainer.with_progress(!a.quiet);
+    eprintln!("data: {}", source.describe());
+    eprintln!(
+        "model: {} ({} parameters), {} epochs, batch {}, run folder {}",
+        N::KIND,
+        trainer.model().param_count(),
+        trainer.config().schedule.total_epochs(),
+        trainer.config().batch_size,
+        a.out.display()
+    );
+    train_loop(trainer, source.as_ref())
+}
+
+/// Run `vpcal train`.
+pub fn run(a: Args) -> Result<()> {
+    let loss = match a.loss {
+        LossArg::Nl1 => NormLoss::L1,
+        LossArg::Nl2 => NormLoss::L2,
+    };
+    match a.arch {
+        Arch::Heatmap => run_arch::<StackedHourglass>(&a, ModelConfig::preset(&a.preset)?),
+        Arch::Resnet50 | Arch::HourglassPool => {
+            let backbone = if a.arch == Arch::Resnet50 {
+                "resnet50"
+            } else {
+                "hourglass-pool"
+            };
+            let config = match a.preset.as_str() {
+                "paper" if a.arch == Arch::Resnet50 => RegressionConfig::resnet50(loss),
+                "paper" => RegressionConfig::hourglass_pool(loss),
+                "tiny" => RegressionConfig::tiny(backbone, loss)?,
+                other => bail!("unknown --preset {other:?} (expected paper or tiny)"),
+            };
+            run_arch::<Regressor>(&a, config)
+        }
+    }
+}
