@@ -638,6 +638,10 @@ fn memo_keys_far_beyond_the_input_still_work() {
     let v = pickle::from_slice(p).unwrap();
     assert_eq!(
         v,
-        Value::Tuple(vec![Value::List(vec![]), Value::Int(7), Value::Str("a".into())])
+        Value::Tuple(vec![
+            Value::List(vec![]),
+            Value::Int(7),
+            Value::Str("a".into())
+        ])
     );
 }

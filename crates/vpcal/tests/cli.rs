@@ -251,6 +251,8 @@ fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
     let out = vpcal(&[
         "aggregate",
         vpout.to_str().unwrap(),
+        "--method",
+        "reference",
         "--pp",
         "960.5,540.5",
         "-o",
@@ -314,19 +316,20 @@ fn bad_input_fails_with_one_line_naming_the_file_and_writes_nothing() {
         r#"[{"vp1": [1, 2], "vp2": [3, 4], "score": 0.05, "frame_cnt": 1}]"#,
     )
     .unwrap();
-    let out = vpcal(&[
-        "aggregate",
-        bad.to_str().unwrap(),
-        "-o",
-        out_path.to_str().unwrap(),
-    ]);
-    assert!(!out.status.success());
-    assert!(
-        stderr(&out).contains("not enough evidence"),
-        "{}",
-        stderr(&out)
-    );
-    assert!(!out_path.exists());
+    for method in ["reference", "robust"] {
+        let out = vpcal(&[
+            "aggregate",
+            bad.to_str().unwrap(),
+            "--method",
+            method,
+            "-o",
+            out_path.to_str().unwrap(),
+        ]);
+        assert!(!out.status.success());
+        let err = stderr(&out);
+        assert!(err.contains("not enough evidence"), "{method}: {err}");
+        assert!(!out_path.exists());
+    }
     // A bad flag value is clap's error (exit code 2).
     let out = vpcal(&["aggregate", "x.json", "--pp", "1,2,3", "-o", "y.json"]);
     assert_eq!(out.status.code(), Some(2));
@@ -400,4 +403,60 @@ fn eval_bcp_scores_a_synthetic_car_park() {
     assert!((s - scale).abs() < 1e-9, "{s}");
     let off = by_name("off");
     assert!(off["pooled_ratio"]["mean"].as_f64().unwrap() > 1.0);
+}
+
+/// The robust aggregator against the paper's rule on the real per-vehicle outputs of three
+/// public CNNs (sessions 0-3): it must at least halve the pooled mean ratio error of every CNN
+/// and bring the best below 9 % (issue: robust aggregation). Reference numbers are the
+/// published rule, reproduced exactly (33.14 / 177.41 / 27.98 %).
+#[test]
+fn robust_aggregation_halves_the_reference_error_on_real_cnn_outputs() {
+    let Some(data) = data_dir() else { return };
+    let out = vpcal(&[
+        "eval",
+        "vpout",
+        "--vp-outputs",
+        data.join("bcs/vp_outputs").to_str().unwrap(),
+        "--dataset",
+        data.join("bcs/dataset").to_str().unwrap(),
+        "--split",
+        "A",
+        "--json",
+    ]);
+    // Split A drops session 0: check the pooled numbers on sessions 1-3 first, then all.
+    assert!(out.status.success(), "{}", stderr(&out));
+    let all = vpcal(&[
+        "eval",
+        "vpout",
+        "--vp-outputs",
+        data.join("bcs/vp_outputs").to_str().unwrap(),
+        "--dataset",
+        data.join("bcs/dataset").to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(all.status.success(), "{}", stderr(&all));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&all)).unwrap();
+    let rows = json.as_array().unwrap();
+    let mut best = f64::INFINITY;
+    let mut variants = 0;
+    for r in rows.iter().filter(|r| r["method"] == "robust") {
+        let reference = rows
+            .iter()
+            .find(|x| x["method"] == "reference" && x["variant"] == r["variant"])
+            .unwrap();
+        let rob = r["pooled_ratio"]["mean"].as_f64().unwrap();
+        let refm = reference["pooled_ratio"]["mean"].as_f64().unwrap();
+        // Every video calibrated by both.
+        assert_eq!(r["invalid"], 0, "{}", r["variant"]);
+        assert_eq!(r["evaluated"], reference["evaluated"]);
+        assert!(
+            rob <= refm / 2.0,
+            "{}: robust {rob} vs reference {refm}",
+            r["variant"]
+        );
+        best = best.min(rob);
+        variants += 1;
+    }
+    assert_eq!(variants, 3);
+    assert!(best < 9.0, "best robust pooled mean {best}");
 }

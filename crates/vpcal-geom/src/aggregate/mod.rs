@@ -3,8 +3,12 @@
 //! - [`reference`]: the paper's rule (medians of focal lengths, horizon slopes and
 //!   intercepts), reproduced exactly, including how the reference code treated NaN and
 //!   infinite values.
+//! - [`robust`]: VP1 as the robust intersection of the vehicles' VP1 lines, then focal
+//!   length, roll and the CNN's ray bias fitted to the vehicles' VP2 rays with weak priors;
+//!   duplicate and small boxes down-weighted; bootstrap confidence.
 
 pub mod reference;
+pub mod robust;
 
 use crate::point::{BoxPx, Point2};
 

@@ -6,24 +6,124 @@ use std::path::PathBuf;
 use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
 use vpcal_formats::reference::read_vpout;
 use vpcal_geom::aggregate::reference::{self, ReferenceOptions};
-use vpcal_geom::aggregate::VehicleVps;
+use vpcal_geom::aggregate::robust::{self, RobustOptions};
+use vpcal_geom::aggregate::{AggregateError, VehicleVps};
 use vpcal_geom::Point2;
+
+/// Aggregation method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// Robust line intersection and focal fit (DESIGN.md §7 improved; the default).
+    Robust,
+    /// The paper's medians, exactly as the reference code computed them.
+    Reference,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Robust => "robust",
+            Method::Reference => "reference",
+        }
+    }
+}
+
+/// The outcome of one aggregation: the two VPs and what to tell the user.
+#[derive(Debug, Clone)]
+pub struct Aggregated {
+    pub vp1: Point2,
+    pub vp2: Point2,
+    pub focal_px: f64,
+    pub summary: String,
+}
+
+/// Aggregate with `method`; `image_size` is used by the robust method's priors.
+///
+/// # Errors
+/// "Not enough evidence" from the method.
+pub fn aggregate(
+    vehicles: &[VehicleVps],
+    pp: Point2,
+    image_size: (u32, u32),
+    method: Method,
+    min_score: f64,
+    bootstrap: usize,
+) -> Result<Aggregated, AggregateError> {
+    match method {
+        Method::Reference => {
+            let r = reference::aggregate(vehicles, pp, &ReferenceOptions { min_score })?;
+            Ok(Aggregated {
+                vp1: r.vp1,
+                vp2: r.vp2,
+                focal_px: r.focal_px,
+                summary: format!(
+                    "reference: {} vehicles, {} above score {min_score}, {} with a real focal length",
+                    r.pairs_in, r.pairs_scored, r.pairs_used
+                ),
+            })
+        }
+        Method::Robust => {
+            let options = RobustOptions {
+                min_score,
+                image_size: Some([f64::from(image_size.0), f64::from(image_size.1)]),
+                bootstrap,
+                ..RobustOptions::default()
+            };
+            let r = robust::aggregate(vehicles, pp, &options)?;
+            let e = &r.evidence;
+            let mut summary = format!(
+                "robust: {} vehicles, {} used (effective weight {:.0}, {} repeated boxes down-weighted), \
+                 {} VP1 inliers, {} VP2 inliers, roll {:.2}°, {}",
+                e.pairs_in,
+                e.pairs_used,
+                e.effective_vehicles,
+                e.repeated_boxes,
+                e.vp1_inliers,
+                e.vp2_inliers,
+                r.roll.to_degrees(),
+                if e.rays_trusted {
+                    "VP2 points agree with the rays (data trusted)"
+                } else {
+                    "VP2 points disagree with the rays (focal prior in use)"
+                }
+            );
+            if let Some(c) = &r.confidence {
+                summary.push_str(&format!(
+                    "; focal 68% interval {:.0}-{:.0} px (VP2 rays alone: {:.0} px), horizon ±{:.2}°",
+                    c.focal_px_p16, c.focal_px_p84, c.focal_px_data_only, c.horizon_angle_sd_deg
+                ));
+            }
+            Ok(Aggregated {
+                vp1: r.calibration.vp1,
+                vp2: r.calibration.vp2,
+                focal_px: r.calibration.focal_px,
+                summary,
+            })
+        }
+    }
+}
 
 /// Turn per-vehicle VP pairs (a VPout JSON file) into a camera calibration.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Per-vehicle VP outputs (the reference's VPout_*.json format).
     pub vpout: PathBuf,
+    /// Aggregation method.
+    #[arg(long, value_enum, default_value_t = Method::Robust)]
+    pub method: Method,
     /// Principal point x,y in frame pixels. Default: the BrnoCompSpeed convention for
     /// --image-size, (W/2 + 0.5, H/2 + 0.5).
     #[arg(long, value_parser = args::point)]
     pub pp: Option<Point2>,
-    /// Image size WxH, used for the default principal point.
+    /// Image size WxH, used for the default principal point and the robust method's priors.
     #[arg(long, value_parser = args::size, default_value = "1920x1080")]
     pub image_size: (u32, u32),
     /// Keep vehicles whose detector score is above this.
     #[arg(long, default_value_t = 0.1)]
     pub min_score: f64,
+    /// Bootstrap resamples for the robust method's confidence (0 to skip).
+    #[arg(long, default_value_t = 30)]
+    pub bootstrap: usize,
     /// Output BrnoCompSpeed system file (system_<name>.json).
     #[arg(short, long)]
     pub output: PathBuf,
@@ -35,11 +135,15 @@ pub fn run(args: Args) -> Result<()> {
         .pp
         .unwrap_or_else(|| args::bcs_principal_point(args.image_size.0, args.image_size.1));
     let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
-    let options = ReferenceOptions {
-        min_score: args.min_score,
-    };
-    let result = reference::aggregate(&vehicles, pp, &options)
-        .with_context(|| format!("aggregating {}", args.vpout.display()))?;
+    let result = aggregate(
+        &vehicles,
+        pp,
+        args.image_size,
+        args.method,
+        args.min_score,
+        args.bootstrap,
+    )
+    .with_context(|| format!("aggregating {}", args.vpout.display()))?;
     let system = SystemFile::new(SystemCalibration {
         vp1: result.vp1,
         vp2: result.vp2,
@@ -47,12 +151,9 @@ pub fn run(args: Args) -> Result<()> {
         scale: 1.0,
     });
     write_system(&args.output, &system)?;
+    eprintln!("{}", result.summary);
     eprintln!(
-        "{} vehicles, {} above score {}, {} used; f = {:.1} px, vp1 = ({:.2}, {:.2}), vp2 = ({:.2}, {:.2}) -> {}",
-        result.pairs_in,
-        result.pairs_scored,
-        args.min_score,
-        result.pairs_used,
+        "f = {:.1} px, vp1 = ({:.2}, {:.2}), vp2 = ({:.2}, {:.2}) -> {}",
         result.focal_px,
         result.vp1.x,
         result.vp1.y,

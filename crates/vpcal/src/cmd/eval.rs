@@ -6,12 +6,16 @@
 //! with the optimal per-session scale (BrnoCarPark). Pooled rows concatenate all pairs, as the
 //! paper does.
 
+use super::aggregate::{aggregate, Method};
 use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use vpcal_formats::bcp::read_gt_pairs;
-use vpcal_formats::bcs::{self, read_gt, read_system, SystemFile};
+use vpcal_formats::bcs::{self, read_gt, read_system, write_system, SystemCalibration, SystemFile};
+use vpcal_formats::reference::read_vpout;
+use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::{
     optimal_scale, ratio_errors, scaled_distance_errors, summarize, RoadMeasurement, Summary,
@@ -25,6 +29,37 @@ pub enum EvalCommand {
     Bcs(BcsArgs),
     /// BrnoCarPark: GROUND_TRUTH/<session>/gt_pairs.json against RESULTS/<session>/system_<name>.json.
     Bcp(BcpArgs),
+    /// Aggregate per-vehicle VP files (VP_OUTPUTS/<video>/VPout_*.json) with several methods
+    /// and compare their BrnoCompSpeed ratio errors, per video and pooled.
+    Vpout(VpoutArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct VpoutArgs {
+    /// Directory of per-video folders holding VPout_*.json files.
+    #[arg(long)]
+    pub vp_outputs: PathBuf,
+    /// The BrnoCompSpeed dataset directory (ground truth).
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Aggregation methods to compare.
+    #[arg(long, value_enum, num_args = 1.., default_values = ["reference", "robust"])]
+    pub methods: Vec<Method>,
+    /// Only the sessions of an official split: A (1-6), B (3-6) or C (4-6).
+    #[arg(long, value_parser = parse_split)]
+    pub split: Option<char>,
+    /// Image size WxH of the videos (principal point: the BrnoCompSpeed convention).
+    #[arg(long, value_parser = super::args::size, default_value = "1920x1080")]
+    pub image_size: (u32, u32),
+    /// Keep vehicles whose detector score is above this.
+    #[arg(long, default_value_t = 0.1)]
+    pub min_score: f64,
+    /// Also write every calibration as <DIR>/<video>/system_<variant>_<method>.json.
+    #[arg(long)]
+    pub write_results: Option<PathBuf>,
+    /// Print machine-readable JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -75,6 +110,7 @@ pub fn run(cmd: EvalCommand) -> Result<()> {
     match cmd {
         EvalCommand::Bcs(args) => run_bcs(&args),
         EvalCommand::Bcp(args) => run_bcp(&args),
+        EvalCommand::Vpout(args) => run_vpout(&args),
     }
 }
 
@@ -412,4 +448,212 @@ fn print_row(name: &str, ratio: Option<&Summary>, distance: Option<&Summary>, v:
             v.reason.as_deref().unwrap_or("no camera")
         ),
     }
+}
+
+/// One variant (VPout file stem) and method, over all videos.
+#[derive(Debug, Clone, Serialize)]
+pub struct VpoutResult {
+    pub variant: String,
+    pub method: &'static str,
+    #[serde(flatten)]
+    pub result: SystemResult,
+    /// Focal length per video, pixels (`None` when the method gave no calibration).
+    pub focal_px: Vec<Option<f64>>,
+}
+
+/// Aggregate every VPout file with every method and evaluate it; the library entry point of
+/// `vpcal eval vpout`.
+///
+/// # Errors
+/// Unreadable directories, ground truth or VPout files; no video with both.
+pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
+    let mut videos = bcs::list_videos(&args.dataset).with_context(|| {
+        format!(
+            "listing the BrnoCompSpeed dataset {}",
+            args.dataset.display()
+        )
+    })?;
+    if let Some(split) = args.split {
+        let sessions = bcs::split_sessions(split).unwrap_or(&[]);
+        videos.retain(|(name, _)| {
+            bcs::parse_video_name(name).is_some_and(|(s, _)| sessions.contains(&s))
+        });
+    }
+    // (video, measurements, [(variant, file)])
+    let mut work = Vec::new();
+    let mut variants = BTreeSet::new();
+    for (video, dir) in &videos {
+        let vdir = args.vp_outputs.join(video);
+        let Ok(entries) = std::fs::read_dir(&vdir) else {
+            continue;
+        };
+        let mut files = Vec::new();
+        for e in entries {
+            let path = e
+                .with_context(|| format!("listing {}", vdir.display()))?
+                .path();
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+            if let Some(stem) = name.as_deref().and_then(|n| n.strip_suffix(".json")) {
+                if stem.starts_with("VPout") {
+                    variants.insert(stem.to_string());
+                    files.push((stem.to_string(), path));
+                }
+            }
+        }
+        if !files.is_empty() {
+            let gt = read_gt(dir)?;
+            work.push((video.clone(), gt.road_measurements(), files));
+        }
+    }
+    if work.is_empty() {
+        bail!(
+            "no video has both ground truth under {} and VPout_*.json under {}",
+            args.dataset.display(),
+            args.vp_outputs.display()
+        );
+    }
+    let pp = super::args::bcs_principal_point(args.image_size.0, args.image_size.1);
+    // Every (video, file, method) job, run in parallel.
+    let jobs: Vec<(usize, String, PathBuf, Method)> = work
+        .iter()
+        .enumerate()
+        .flat_map(|(vi, (_, _, files))| {
+            files.iter().flat_map(move |(stem, path)| {
+                args.methods
+                    .iter()
+                    .map(move |m| (vi, stem.clone(), path.clone(), *m))
+            })
+        })
+        .collect();
+    /// One scored job: video index, VPout file stem, method, its row and focal length.
+    type Outcome = (usize, String, Method, VideoResult, Option<f64>);
+    let outcomes: Vec<Result<Outcome>> = jobs
+        .par_iter()
+        .map(|(vi, stem, path, method)| {
+            let (video, measurements, _) = &work[*vi];
+            let items = read_vpout(path)?;
+            let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
+            // The table shows no confidence: skip the bootstrap.
+            let agg = aggregate(&vehicles, pp, args.image_size, *method, args.min_score, 0);
+            let (row, focal) = match agg {
+                Ok(a) => {
+                    let system = SystemFile::new(SystemCalibration {
+                        vp1: a.vp1,
+                        vp2: a.vp2,
+                        pp,
+                        scale: 1.0,
+                    });
+                    if let Some(dir) = &args.write_results {
+                        let out = dir.join(video);
+                        std::fs::create_dir_all(&out)
+                            .with_context(|| format!("creating {}", out.display()))?;
+                        write_system(
+                            &out.join(format!("system_{stem}_{}.json", method.name())),
+                            &system,
+                        )?;
+                    }
+                    (
+                        evaluate_one(video, Some(&system), measurements, &ScaleMode::FromFile),
+                        Some(a.focal_px),
+                    )
+                }
+                Err(e) => {
+                    let mut r = evaluate_one(video, None, measurements, &ScaleMode::FromFile);
+                    r.status = "invalid";
+                    r.reason = Some(e.to_string());
+                    (r, None)
+                }
+            };
+            Ok((*vi, stem.clone(), *method, row, focal))
+        })
+        .collect();
+    let mut rows = Vec::with_capacity(outcomes.len());
+    for o in outcomes {
+        rows.push(o?);
+    }
+    let mut out = Vec::new();
+    for variant in &variants {
+        for method in &args.methods {
+            let mut videos_rows = Vec::new();
+            let mut focals = Vec::new();
+            for (vi, (video, measurements, _)) in work.iter().enumerate() {
+                match rows
+                    .iter()
+                    .find(|r| r.0 == vi && &r.1 == variant && r.2 == *method)
+                {
+                    Some(r) => {
+                        videos_rows.push(r.3.clone());
+                        focals.push(r.4);
+                    }
+                    None => {
+                        videos_rows.push(evaluate_one(
+                            video,
+                            None,
+                            measurements,
+                            &ScaleMode::FromFile,
+                        ));
+                        focals.push(None);
+                    }
+                }
+            }
+            out.push(VpoutResult {
+                variant: variant.clone(),
+                method: method.name(),
+                result: pool(format!("{variant}_{}", method.name()), videos_rows),
+                focal_px: focals,
+            });
+        }
+    }
+    Ok(out)
+}
+
+fn run_vpout(args: &VpoutArgs) -> Result<()> {
+    let results = evaluate_vpout(args)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+        return Ok(());
+    }
+    let variants: BTreeSet<&str> = results.iter().map(|r| r.variant.as_str()).collect();
+    for (k, variant) in variants.iter().enumerate() {
+        if k > 0 {
+            println!();
+        }
+        let rows: Vec<&VpoutResult> = results.iter().filter(|r| r.variant == *variant).collect();
+        println!("{variant}");
+        println!("  mean ratio error % (focal length px) per method; '-' = no VPout file");
+        let mut header = format!("{:<18}", "video");
+        for r in &rows {
+            header.push_str(&format!(" {:>20}", r.method));
+        }
+        println!("{header}");
+        let n_videos = rows.first().map_or(0, |r| r.result.videos.len());
+        for vi in 0..n_videos {
+            let mut line = format!("{:<18}", rows[0].result.videos[vi].video);
+            for r in &rows {
+                let v = &r.result.videos[vi];
+                let cell = match (v.status, &v.ratio, r.focal_px[vi]) {
+                    ("ok", Some(s), Some(f)) => format!("{:8.2} ({:>7.0})", s.mean, f),
+                    ("missing", _, _) => "-".to_string(),
+                    _ => "no calibration".to_string(),
+                };
+                line.push_str(&format!(" {cell:>20}"));
+            }
+            println!("{line}");
+        }
+        let mut pooled = format!("{:<18}", "pooled");
+        for r in &rows {
+            let cell = match &r.result.pooled_ratio {
+                Some(s) => format!(
+                    "{:8.2} [{}/{}]",
+                    s.mean,
+                    r.result.evaluated,
+                    r.result.evaluated + r.result.invalid
+                ),
+                None => "-".into(),
+            };
+            pooled.push_str(&format!(" {cell:>20}"));
+        }
+        println!("{pooled}");
+    }
+    Ok(())
 }
