@@ -3,16 +3,29 @@
 //! vanishing points. This is the only vpcal crate that names the ML framework.
 //!
 //! Entry points:
-//! - [`ModelConfig`] (presets [`ModelConfig::paper`], [`ModelConfig::tiny`]) and
-//!   [`StackedHourglass`] (the network, DESIGN.md §5).
-//! - [`store`]: weights as safetensors with the config in the metadata.
+//! - [`ModelConfig`] (presets [`ModelConfig::paper`], [`ModelConfig::small`],
+//!   [`ModelConfig::tiny`]) and [`StackedHourglass`], the network of DESIGN.md §5;
+//!   [`regression`] holds the paper's regression baselines (ResNet-50, hourglass + pooling,
+//!   normalised L1/L2 losses).
+//! - [`Trainer`] with [`TrainConfig`] and [`LrSchedule`]: Adam, the paper's two-phase schedule,
+//!   loss over all stacks, per-epoch validation ([`metrics`]), atomic checkpoints, exact
+//!   resume, metrics files and curves ([`report`]).
+//! - [`BatchSource`]: where batches come from — [`PipelineSource`] wraps `vpcal_data`'s
+//!   augmentation pipeline over any `SampleSource`; [`ToySource`] is a synthetic task for
+//!   tests and smoke runs.
+//! - [`VpNet`]: inference — load weights (refusing mismatches), predict VPs of crops, batched.
+//! - [`store`]: safetensors weights with the config in the metadata; [`device`]: `cpu` or
+//!   `wgpu`; [`bench`]: throughput measurement.
 //!
 //! # Conventions
 //! - Images enter as RGB `[0, 1]` NCHW f32 (what `vpcal_data::Batch` holds); the model applies
 //!   its own channel order and normalisation from its config.
-//! - Heatmaps are `[batch, 2 * scales, R, R]`, VP1 at each scale then VP2, decoded by
-//!   `vpcal_geom::heatmap::HeatmapCodec`; VPs are in the *box frame* of the crop.
-//! - The CPU backend is burn's `flex` (pure Rust); a GPU backend is the `wgpu` cargo feature.
+//! - Heatmaps are `[batch, 2 * scales, R, R]`, VP1 at each scale then VP2, encoded and decoded
+//!   by `vpcal_geom::heatmap::HeatmapCodec` (the project's only diamond-space code); VPs are in
+//!   the *box frame* of the crop (the crop spans `[-1, 1]²`).
+//! - Parameter counts include batch-norm running statistics, as Keras (the reference) counts.
+//! - The CPU backend is burn's `flex` (pure Rust, rayon threads); the `wgpu` cargo feature adds
+//!   a GPU backend (Vulkan/Metal/DX12 at run time) that builds on machines without a GPU.
 
 pub mod bench;
 pub mod config;

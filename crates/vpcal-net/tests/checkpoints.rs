@@ -194,3 +194,48 @@ fn mismatching_weights_are_refused_with_names_and_shapes() {
     let err = VpNet::load(&rpath, &device).unwrap_err().to_string();
     assert!(err.contains("reg.safetensors"), "{err}");
 }
+
+#[test]
+fn regression_baseline_trains_checkpoints_and_resumes() {
+    use vpcal_net::regression::{NormLoss, RegressionConfig, Regressor};
+    let config = RegressionConfig::tiny("resnet", NormLoss::L1).unwrap();
+    // Regression batches still carry (unused) heatmap targets: a small codec keeps them cheap.
+    let source = ToySource::new(
+        8,
+        4,
+        3,
+        config.input_size,
+        vpcal_geom::heatmap::HeatmapCodec::new(8, vec![1.0]),
+    );
+    let device = Device::flex();
+    let dir = tempfile::tempdir().unwrap();
+    let mut tc = TrainConfig::new::<Regressor>(config.clone());
+    tc.batch_size = 4;
+    tc.schedule = LrSchedule::constant(2, 1e-3);
+    let mut t = Trainer::<Regressor>::new(tc, dir.path(), &device)
+        .unwrap()
+        .with_progress(false);
+    let first = t.run_epoch(&source).unwrap();
+    assert_eq!(
+        first.train_loss_terms.len(),
+        2,
+        "one normalised-loss term per VP"
+    );
+    assert!(first.train_loss.is_finite() && first.train_loss > 0.0);
+    let m = first.val.unwrap();
+    assert_eq!(m.crops, 4);
+    assert!(
+        m.vp1_median_rel_per_scale.is_empty(),
+        "regression has no scales"
+    );
+    drop(t);
+    let mut t = Trainer::<Regressor>::resume(dir.path(), &device)
+        .unwrap()
+        .with_progress(false);
+    assert_eq!(t.run(&source).unwrap().len(), 2);
+    // The heatmap model refuses to resume a regression run.
+    let err = Trainer::<StackedHourglass>::resume(dir.path(), &device)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("train_config.json"), "{err}");
+}

@@ -33,10 +33,9 @@ pub fn grey_opencv(rgb: &RgbImage) -> GrayImage {
     out
 }
 
-/// `tan(22.5°)`.
-const TAN_22_5: f64 = 0.414_213_562_373_095_05;
-/// `tan(67.5°)`.
-const TAN_67_5: f64 = 2.414_213_562_373_095;
+/// `tan(22.5°) · 2^15`, rounded; `tan(67.5°) = tan(22.5°) + 2`, so its test is
+/// `tg22x + 2 · 2^15 · |gx|`.
+const TAN_22_5_Q15: i64 = 13573;
 
 /// Edges of `gray` as OpenCV's `cv2.Canny(gray, low, high)` finds them (aperture 3, L1
 /// gradient): 255 on edges, 0 elsewhere.
@@ -49,95 +48,98 @@ pub fn canny_opencv(gray: &GrayImage, low: f32, high: f32) -> GrayImage {
     }
     let (low, high) = if low > high { (high, low) } else { (low, high) };
     // Why: OpenCV floors the thresholds for the integer (L1) magnitude.
-    let low = low.floor() as i32;
-    let high = high.floor() as i32;
+    let low = low.floor().clamp(-1.0, 4096.0) as i16;
+    let high = high.floor().clamp(-1.0, 4096.0) as i16;
     let px: &[u8] = gray;
-    let at = |x: isize, y: isize| -> i32 {
-        let xc = x.clamp(0, wu as isize - 1) as usize;
-        let yc = y.clamp(0, hu as isize - 1) as usize;
-        i32::from(px[yc * wu + xc])
-    };
+
+    // The image with a replicated 1-pixel border (OpenCV's Sobel uses BORDER_REPLICATE).
+    let pw = wu + 2;
+    let mut padded = vec![0u8; pw * (hu + 2)];
+    for py in 0..hu + 2 {
+        let sy = py.saturating_sub(1).min(hu - 1);
+        let row = &px[sy * wu..(sy + 1) * wu];
+        let dst = &mut padded[py * pw..(py + 1) * pw];
+        dst[0] = row[0];
+        dst[pw - 1] = row[wu - 1];
+        dst[1..pw - 1].copy_from_slice(row);
+    }
+    // Gradients and L1 magnitude; the magnitude has a zero border (outside the image).
     let n = wu * hu;
-    let mut dx = vec![0i32; n];
-    let mut dy = vec![0i32; n];
-    let mut mag = vec![0i32; n];
+    // |gx|, |gy| <= 4 · 255 and their sum <= 2040: i16 holds them, as in OpenCV.
+    let mut dx = vec![0i16; n];
+    let mut dy = vec![0i16; n];
+    let mut mag = vec![0i16; pw * (hu + 2)];
     for y in 0..hu {
+        let r0 = &padded[y * pw..(y + 1) * pw];
+        let r1 = &padded[(y + 1) * pw..(y + 2) * pw];
+        let r2 = &padded[(y + 2) * pw..(y + 3) * pw];
+        let dxr = &mut dx[y * wu..(y + 1) * wu];
+        let dyr = &mut dy[y * wu..(y + 1) * wu];
+        let mr = &mut mag[(y + 1) * pw + 1..(y + 1) * pw + 1 + wu];
         for x in 0..wu {
-            let (xi, yi) = (x as isize, y as isize);
-            let gx = (at(xi + 1, yi - 1) + 2 * at(xi + 1, yi) + at(xi + 1, yi + 1))
-                - (at(xi - 1, yi - 1) + 2 * at(xi - 1, yi) + at(xi - 1, yi + 1));
-            let gy = (at(xi - 1, yi + 1) + 2 * at(xi, yi + 1) + at(xi + 1, yi + 1))
-                - (at(xi - 1, yi - 1) + 2 * at(xi, yi - 1) + at(xi + 1, yi - 1));
-            let i = y * wu + x;
-            dx[i] = gx;
-            dy[i] = gy;
-            mag[i] = gx.abs() + gy.abs();
+            let v = |r: &[u8], i: usize| i16::from(r[i]);
+            let gx = (v(r0, x + 2) + 2 * v(r1, x + 2) + v(r2, x + 2))
+                - (v(r0, x) + 2 * v(r1, x) + v(r2, x));
+            let gy = (v(r2, x) + 2 * v(r2, x + 1) + v(r2, x + 2))
+                - (v(r0, x) + 2 * v(r0, x + 1) + v(r0, x + 2));
+            dxr[x] = gx;
+            dyr[x] = gy;
+            mr[x] = gx.abs() + gy.abs();
         }
     }
-    let m_at = |x: isize, y: isize| -> i32 {
-        if x < 0 || y < 0 || x >= wu as isize || y >= hu as isize {
-            0
-        } else {
-            mag[y as usize * wu + x as usize]
-        }
-    };
-    // 0 = not an edge, 1 = weak candidate, 2 = edge.
-    let mut state = vec![0u8; n];
+    // Non-maximum suppression on the padded grid. 0 = not an edge, 1 = weak candidate,
+    // 2 = edge; the border stays 0.
+    let mut state = vec![0u8; pw * (hu + 2)];
     let mut stack: Vec<usize> = Vec::new();
     for y in 0..hu {
         for x in 0..wu {
-            let i = y * wu + x;
-            let m = mag[i];
+            let p = (y + 1) * pw + x + 1;
+            let m = mag[p];
             if m <= low {
                 continue;
             }
-            let (xi, yi) = (x as isize, y as isize);
-            let ax = f64::from(dx[i].abs());
-            let ay = f64::from(dy[i].abs());
-            let is_max = if ay < ax * TAN_22_5 {
-                m > m_at(xi - 1, yi) && m >= m_at(xi + 1, yi)
-            } else if ay > ax * TAN_67_5 {
-                m > m_at(xi, yi - 1) && m >= m_at(xi, yi + 1)
+            let (gx, gy) = (dx[y * wu + x], dy[y * wu + x]);
+            // tan 22.5° and tan 67.5° in 15-bit fixed point, as OpenCV compares them.
+            let ax = i64::from(gx.abs());
+            let ay = i64::from(gy.abs()) << 15;
+            let tg22x = ax * TAN_22_5_Q15;
+            let is_max = if ay < tg22x {
+                m > mag[p - 1] && m >= mag[p + 1]
+            } else if ay > tg22x + (ax << 16) {
+                m > mag[p - pw] && m >= mag[p + pw]
+            } else if (gx < 0) != (gy < 0) {
+                m > mag[p - pw + 1] && m > mag[p + pw - 1]
             } else {
-                let s: isize = if (dx[i] < 0) != (dy[i] < 0) { -1 } else { 1 };
-                m > m_at(xi - s, yi - 1) && m > m_at(xi + s, yi + 1)
+                m > mag[p - pw - 1] && m > mag[p + pw + 1]
             };
             if !is_max {
                 continue;
             }
             if m > high {
-                state[i] = 2;
-                stack.push(i);
+                state[p] = 2;
+                stack.push(p);
             } else {
-                state[i] = 1;
+                state[p] = 1;
             }
         }
     }
-    while let Some(i) = stack.pop() {
-        let (x, y) = ((i % wu) as isize, (i / wu) as isize);
-        for (ox, oy) in [
-            (-1, -1),
-            (0, -1),
-            (1, -1),
-            (-1, 0),
-            (1, 0),
-            (-1, 1),
-            (0, 1),
-            (1, 1),
-        ] {
-            let (nx, ny) = (x + ox, y + oy);
-            if nx < 0 || ny < 0 || nx >= wu as isize || ny >= hu as isize {
-                continue;
-            }
-            let j = ny as usize * wu + nx as usize;
-            if state[j] == 1 {
-                state[j] = 2;
-                stack.push(j);
+    // Hysteresis: weak candidates 8-connected to an edge become edges.
+    let offsets = [pw + 1, pw, pw - 1, 1];
+    while let Some(p) = stack.pop() {
+        for &o in &offsets {
+            for q in [p - o, p + o] {
+                if state[q] == 1 {
+                    state[q] = 2;
+                    stack.push(q);
+                }
             }
         }
     }
-    for (o, s) in out.iter_mut().zip(state) {
-        *o = if s == 2 { 255 } else { 0 };
+    for (y, row) in out.chunks_exact_mut(wu).enumerate() {
+        let srow = &state[(y + 1) * pw + 1..(y + 1) * pw + 1 + wu];
+        for (o, &s) in row.iter_mut().zip(srow) {
+            *o = if s == 2 { 255 } else { 0 };
+        }
     }
     out
 }

@@ -99,13 +99,13 @@ impl FrameFilter {
             let grey = grey_opencv(&frame.image);
             let (lo, hi) = self.config.canny_thresholds;
             let edges = canny_opencv(&grey, lo, hi);
-            let diff = match &self.prev_edges {
-                Some(prev) if prev.dimensions() == edges.dimensions() => {
-                    let mut d = edges.clone();
-                    for (v, &p) in d.iter_mut().zip(prev.iter()) {
-                        *v = v.wrapping_sub(p);
+            // The previous edge map's buffer becomes the difference (no copy).
+            let diff = match self.prev_edges.take() {
+                Some(mut prev) if prev.dimensions() == edges.dimensions() => {
+                    for (p, &e) in prev.iter_mut().zip(edges.iter()) {
+                        *p = e.wrapping_sub(*p);
                     }
-                    d
+                    prev
                 }
                 _ => edges.clone(),
             };

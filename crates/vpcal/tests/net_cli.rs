@@ -1,0 +1,115 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! End-to-end tests of `vpcal train` and `vpcal predict` on the toy data (no dataset needed).
+
+use std::process::{Command, Output};
+
+fn vpcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vpcal"))
+        .args(args)
+        .output()
+        .expect("run vpcal")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+#[test]
+fn train_resume_and_predict_on_toy_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let run_s = run.to_str().unwrap();
+    let common = [
+        "train", "--data", "toy:16", "--preset", "tiny", "--batch", "8", "--out", run_s, "--quiet",
+    ];
+    let o = vpcal(&[&common[..], &["--epochs", "1"]].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("epoch 1/1"), "{}", text(&o));
+    for f in [
+        "metrics.csv",
+        "metrics.jsonl",
+        "curves.png",
+        "latest.json",
+        "train_config.json",
+    ] {
+        assert!(run.join(f).is_file(), "{f} missing");
+    }
+    // A second new run into the same folder is refused; resuming continues at epoch 2.
+    let o = vpcal(&[&common[..], &["--epochs", "1"]].concat());
+    assert!(
+        !o.status.success() && text(&o).contains("--resume"),
+        "{}",
+        text(&o)
+    );
+    let o = vpcal(&[
+        "train", "--resume", "--out", run_s, "--epochs", "2", "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("epoch 2/2") && !text(&o).contains("epoch 1/2"),
+        "{}",
+        text(&o)
+    );
+
+    // Predict on a crop cut from a frame, with the VPs mapped back to the frame.
+    let frame = image::RgbImage::from_fn(120, 90, |x, y| {
+        image::Rgb([(x * 2) as u8, (y * 2) as u8, 90])
+    });
+    let frame_path = dir.path().join("frame.png");
+    frame.save(&frame_path).unwrap();
+    let crop = image::imageops::crop_imm(&frame, 20, 10, 60, 40).to_image();
+    let crop_path = dir.path().join("car.png");
+    crop.save(&crop_path).unwrap();
+    let out = dir.path().join("pred");
+    let o = vpcal(&[
+        "predict",
+        crop_path.to_str().unwrap(),
+        "--weights",
+        run_s,
+        "--box",
+        "20,10,80,50",
+        "--frame",
+        frame_path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let line = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .last()
+        .unwrap()
+        .to_string();
+    let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(v["spreads"].as_array().unwrap().len(), 4);
+    // frame = centre + box-frame * half size, when the VP is finite.
+    if let (Some(b), Some(f)) = (v["vp1_box"].as_array(), v["vp1_frame"].as_array()) {
+        let (bx, fx) = (b[0].as_f64().unwrap(), f[0].as_f64().unwrap());
+        assert!((fx - (50.0 + 30.0 * bx)).abs() < 1e-6, "{v}");
+    }
+    assert!(out.join("car.heatmaps.png").is_file());
+    assert!(out.join("car.frame.png").is_file());
+
+    // Bad input is named.
+    let o = vpcal(&[
+        "predict",
+        crop_path.to_str().unwrap(),
+        "--weights",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && text(&o).contains("neither a checkpoint folder"),
+        "{}",
+        text(&o)
+    );
+    let o = vpcal(&["predict", "missing.png", "--weights", run_s]);
+    assert!(
+        !o.status.success() && text(&o).contains("missing.png"),
+        "{}",
+        text(&o)
+    );
+}
