@@ -67,7 +67,19 @@ impl VpNet {
     /// [`NetError::Weights`] / [`NetError::Checkpoint`] naming the file when it holds no
     /// config, another architecture, or tensors that do not fit the config.
     pub fn load(path: &Path, device: &Device) -> Result<VpNet, NetError> {
-        let file = WeightsFile::read(&weights_path(path)?)?;
+        Self::from_weights(&WeightsFile::read(&weights_path(path)?)?, device)
+    }
+
+    /// Load weights held in memory (e.g. a model embedded in the binary); `label` names them
+    /// in errors. The model config comes from the weights' metadata.
+    ///
+    /// # Errors
+    /// As [`VpNet::load`].
+    pub fn from_bytes(bytes: &[u8], label: &Path, device: &Device) -> Result<VpNet, NetError> {
+        Self::from_weights(&WeightsFile::parse(bytes, label)?, device)
+    }
+
+    fn from_weights(file: &WeightsFile, device: &Device) -> Result<VpNet, NetError> {
         let config = file
             .config::<ModelConfig>()?
             .ok_or_else(|| NetError::Weights {
@@ -75,7 +87,7 @@ impl VpNet {
                 message: "no vpcal model config in the metadata: use VpNet::load_with_config"
                     .into(),
             })?;
-        Self::from_file(&file, config, device)
+        Self::from_file(file, config, device)
     }
 
     /// Load weights into a model built from `config`, refusing a file whose stored config

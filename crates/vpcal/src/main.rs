@@ -2,7 +2,8 @@
 //!
 //! A thin binary: flags are parsed by clap into one `Args` struct per subcommand (in `cmd/`),
 //! each subcommand validates its flags and calls the library crates. Errors are printed with
-//! their whole context chain and give exit code 1; bad flags give clap's exit code 2.
+//! their whole context chain and give exit code 1; bad flags give clap's exit code 2;
+//! `calibrate` and `demo` exit with 3 when the footage cannot support a calibration.
 
 mod cmd;
 
@@ -19,6 +20,14 @@ struct Cli {
 // One variant per subcommand; each lives in `cmd/<name>.rs` with `Args` and `run`.
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Calibrate a fixed traffic camera from a video, an image folder or an image.
+    Calibrate(cmd::calibrate::Args),
+    /// Render a synthetic traffic clip with a known camera, calibrate it and compare.
+    Demo(cmd::demo::Args),
+    /// Add a metric scale to a calibration from one known distance on the road.
+    Scale(cmd::measure::ScaleArgs),
+    /// Measure distances on the road with a calibration.
+    Measure(cmd::measure::MeasureArgs),
     /// Turn per-vehicle VP pairs (a VPout JSON file) into a camera calibration.
     Aggregate(cmd::aggregate::Args),
     /// Training data: preview the augmentation, benchmark the batch pipeline.
@@ -42,6 +51,10 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Calibrate(args) => return exit_code(cmd::calibrate::run(args)),
+        Command::Demo(args) => return exit_code(cmd::demo::run(args)),
+        Command::Scale(args) => cmd::measure::run_scale(args),
+        Command::Measure(args) => cmd::measure::run_measure(args),
         Command::Aggregate(args) => cmd::aggregate::run(args),
         Command::Data(args) => cmd::data::run(args),
         Command::Eval(args) => cmd::eval::run(args),
@@ -50,8 +63,13 @@ fn main() -> std::process::ExitCode {
         Command::Predict(args) => cmd::predict::run(args),
         Command::BenchNet(args) => cmd::bench_net::run(args),
     };
+    exit_code(result.map(|()| std::process::ExitCode::SUCCESS))
+}
+
+/// The exit code of a subcommand's result; errors are printed with their context chain.
+fn exit_code(result: anyhow::Result<std::process::ExitCode>) -> std::process::ExitCode {
     match result {
-        Ok(()) => std::process::ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(err) => {
             eprintln!("error: {err:#}");
             std::process::ExitCode::FAILURE

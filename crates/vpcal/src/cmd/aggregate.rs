@@ -35,6 +35,10 @@ pub struct Aggregated {
     pub vp2: Point2,
     pub focal_px: f64,
     pub summary: String,
+    /// What the method used (counts), as JSON for calibration files.
+    pub evidence: serde_json::Value,
+    /// Bootstrap spread of the robust method (null without bootstrap or for `reference`).
+    pub confidence: serde_json::Value,
 }
 
 /// Aggregate with `method`; `image_size` is used by the robust method's priors.
@@ -60,6 +64,13 @@ pub fn aggregate(
                     "reference: {} vehicles, {} above score {min_score}, {} with a real focal length",
                     r.pairs_in, r.pairs_scored, r.pairs_used
                 ),
+                evidence: serde_json::json!({
+                    "method": "reference",
+                    "pairs_in": r.pairs_in,
+                    "pairs_scored": r.pairs_scored,
+                    "pairs_used": r.pairs_used,
+                }),
+                confidence: serde_json::Value::Null,
             })
         }
         Method::Robust => {
@@ -93,11 +104,36 @@ pub fn aggregate(
                     c.focal_px_p16, c.focal_px_p84, c.focal_px_data_only, c.horizon_angle_sd_deg
                 ));
             }
+            let evidence = serde_json::json!({
+                "method": "robust",
+                "pairs_in": e.pairs_in,
+                "pairs_used": e.pairs_used,
+                "effective_vehicles": e.effective_vehicles,
+                "repeated_boxes": e.repeated_boxes,
+                "vp1_inliers": e.vp1_inliers,
+                "vp2_inliers": e.vp2_inliers,
+                "rays_trusted": e.rays_trusted,
+                "roll_deg": r.roll.to_degrees(),
+                "ray_bias_deg": r.ray_bias.to_degrees(),
+            });
+            let confidence = match &r.confidence {
+                Some(c) => serde_json::json!({
+                    "focal_px_p16": c.focal_px_p16,
+                    "focal_px_p84": c.focal_px_p84,
+                    "focal_px_vp2_rays_only": c.focal_px_data_only,
+                    "horizon_angle_sd_deg": c.horizon_angle_sd_deg,
+                    "vp1_sd_px": c.vp1_sd_px,
+                    "resamples": c.resamples,
+                }),
+                None => serde_json::Value::Null,
+            };
             Ok(Aggregated {
                 vp1: r.calibration.vp1,
                 vp2: r.calibration.vp2,
                 focal_px: r.calibration.focal_px,
                 summary,
+                evidence,
+                confidence,
             })
         }
     }

@@ -1,0 +1,602 @@
+//! `vpcal calibrate`: footage of a fixed traffic camera to a calibrated camera.
+//!
+//! The whole data flow of DESIGN.md §2, streaming:
+//!
+//! ```text
+//! frames (ffmpeg | folder | image) -> detector (motion | file | onnx) -> per-frame filter
+//!   -> crops (bicubic, network input) -> VP network, batched -> decode with scale selection
+//!   -> VPs in frame pixels, one record per vehicle box -> aggregation (robust | reference)
+//!   -> calib.json, system.json (BCS), vehicles (VPout), overlay PNG
+//! ```
+//!
+//! Memory stays bounded: frames are dropped as soon as their crops are cut; only the
+//! per-vehicle records (a few hundred bytes each) and one picture for the overlay are kept.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use image::RgbImage;
+use serde_json::{json, Value};
+use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
+use vpcal_formats::fs::write_atomic;
+use vpcal_formats::reference::{write_vpout, VpOutItem};
+use vpcal_geom::aggregate::VehicleVps;
+use vpcal_geom::camera::Calibration;
+use vpcal_geom::heatmap::VpPrediction;
+use vpcal_geom::{BoxPx, Point2};
+use vpcal_net::VpNet;
+use vpcal_video::crop::{CropFilter, CropResizer};
+use vpcal_video::detect::{FileDetector, MotionConfig, MotionDetector};
+use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
+use vpcal_video::{Detector, SourceInfo, SourceOptions, Start};
+
+use super::aggregate::{aggregate, Aggregated, Method};
+use super::args;
+use super::overlay;
+
+/// The model shipped with vpcal (see `models/default/MODEL.md`), embedded in the binary.
+pub const BUNDLED_MODEL: &[u8] = include_bytes!(concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../models/default/model.safetensors"
+));
+
+/// Exit code of a run that completed but could not support a calibration.
+pub const EXIT_NOT_ENOUGH_EVIDENCE: u8 = 3;
+
+/// Calibrate a fixed traffic camera from a video, an image folder or an image.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Video file (anything FFmpeg reads), folder of images, or one image.
+    pub input: PathBuf,
+    /// Write the calibration (vpcal's JSON schema) here.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Also write the camera as a BrnoCompSpeed system file.
+    #[arg(long, value_name = "FILE")]
+    pub bcs_json: Option<PathBuf>,
+    /// Also write the per-vehicle records (deep_vp `VPout` JSON).
+    #[arg(long, value_name = "FILE")]
+    pub vehicles: Option<PathBuf>,
+    /// Also write a frame with the horizon, vehicle VP directions and a road grid (PNG).
+    #[arg(long, value_name = "PNG")]
+    pub overlay: Option<PathBuf>,
+    #[command(flatten)]
+    pub pipeline: PipelineArgs,
+    /// Print the calibration as JSON on stdout (the summary stays on stderr).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Frame selection, detection, filtering, network and aggregation settings.
+#[derive(Debug, Clone, clap::Args)]
+pub struct PipelineArgs {
+    /// VP network weights (.safetensors, checkpoint or `vpcal train` run folder). Default: the
+    /// bundled model.
+    #[arg(long, value_name = "PATH")]
+    pub model: Option<PathBuf>,
+    /// Device for the network: `cpu`, or `wgpu` in builds with the `wgpu` feature.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// Crops per network batch.
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    /// Process every K-th frame.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub every: u64,
+    /// Stop after this many processed frames.
+    #[arg(long, value_name = "N")]
+    pub max_frames: Option<u64>,
+    /// Where to start: a frame index (`120`) or a time (`4.5s`).
+    #[arg(long, value_parser = parse_start)]
+    pub start: Option<Start>,
+    /// Boxes from an external detector instead of the motion detector: the reference's
+    /// detections.json, or CSV/JSON rows of frame, box, score (see vpcal-video docs).
+    #[arg(long, value_name = "FILE")]
+    pub detections: Option<PathBuf>,
+    /// Road mask for the motion detector (white = road), e.g. BrnoCompSpeed's video_mask.png.
+    #[arg(long, value_name = "PNG")]
+    pub road_mask: Option<PathBuf>,
+    /// Drop boxes whose detector score is not above this.
+    #[arg(long, default_value_t = 0.1)]
+    pub min_score: f32,
+    /// Keep vehicles that do not move between processed frames (the reference drops them).
+    #[arg(long)]
+    pub keep_static: bool,
+    /// At most this many boxes per frame, best scores first (0: no limit).
+    #[arg(long, default_value_t = 10)]
+    pub max_per_frame: usize,
+    /// Aggregation of the per-vehicle VPs.
+    #[arg(long, value_enum, default_value_t = Method::Robust)]
+    pub method: Method,
+    /// Bootstrap resamples for the confidence of the robust method (0 to skip).
+    #[arg(long, default_value_t = 30)]
+    pub bootstrap: usize,
+    /// Principal point x,y in pixels. Default: the image centre.
+    #[arg(long, value_parser = args::point)]
+    pub pp: Option<Point2>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+fn parse_start(s: &str) -> Result<Start, String> {
+    s.parse::<Start>().map_err(|e| e.to_string())
+}
+
+/// One vehicle box seen by the network.
+#[derive(Debug, Clone)]
+pub struct VehicleRecord {
+    /// 0-based frame index in the source.
+    pub frame: u64,
+    /// Detector score.
+    pub score: f32,
+    /// The box frame of the crop (clamped integer box), frame pixels.
+    pub crop_box: BoxPx,
+    /// The decoded network output, box frame.
+    pub prediction: VpPrediction,
+    /// VP1 and VP2 in frame pixels.
+    pub vp1: Point2,
+    pub vp2: Point2,
+}
+
+impl VehicleRecord {
+    pub fn to_vehicle(&self) -> VehicleVps {
+        VehicleVps {
+            vp1: self.vp1,
+            vp2: self.vp2,
+            score: f64::from(self.score),
+            box_px: Some(self.crop_box),
+            frame: Some(self.frame as f64),
+            vp1_spread: Some(self.prediction.vp1_spread()),
+            vp2_spread: Some(self.prediction.vp2_spread()),
+        }
+    }
+
+    /// The record in deep_vp's `VPout` layout (frame-normalised box `[ymin, xmin, ymax, xmax]`).
+    fn to_vpout(&self, width: u32, height: u32) -> VpOutItem {
+        let b = &self.crop_box;
+        let (w, h) = (f64::from(width), f64::from(height));
+        let p = &self.prediction;
+        VpOutItem {
+            frame_cnt: self.frame as f64,
+            score: f64::from(self.score),
+            vp1: self.vp1,
+            vp2: self.vp2,
+            box_norm: Some([b.y0 / h, b.x0 / w, b.y1 / h, b.x1 / w]),
+            box_center: Some(b.center()),
+            box_scale: Some(b.half_size()),
+            vp_box: Some([b.y0, b.x0, b.y1, b.x1]),
+            vp1_box: Some(p.vp1),
+            vp2_box: Some(p.vp2),
+            pred_vps: p
+                .per_scale
+                .iter()
+                .map(|[a, b]| [a.x, a.y, b.x, b.y])
+                .collect(),
+            pred_vars: p.spreads.clone(),
+            vp1_var: Some(p.vp1_spread()),
+            vp2_var: Some(p.vp2_spread()),
+        }
+    }
+}
+
+/// Counts of what the pipeline saw.
+#[derive(Debug, Clone, Default)]
+pub struct PipelineStats {
+    pub frames: u64,
+    pub detections: u64,
+    pub dropped_low_score: u64,
+    pub dropped_static: u64,
+    pub dropped_over_limit: u64,
+    pub dropped_outside: u64,
+    pub crops: u64,
+    pub seconds: f64,
+}
+
+/// Everything the pipeline produced before aggregation.
+pub struct PipelineOutput {
+    pub info: SourceInfo,
+    pub detector: String,
+    pub model: String,
+    pub records: Vec<VehicleRecord>,
+    pub stats: PipelineStats,
+    /// A picture of the scene for the overlay: the detector's background model when it has
+    /// one (no vehicles in the way), else the last frame.
+    pub picture: Option<RgbImage>,
+}
+
+/// Load the network named by `--model`, or the bundled one.
+pub fn load_model(model: Option<&Path>, device: &str) -> Result<(VpNet, String)> {
+    let device = vpcal_net::device::select(device)?;
+    match model {
+        Some(path) => {
+            let net = VpNet::load(path, &device)
+                .with_context(|| format!("loading the VP network from {}", path.display()))?;
+            Ok((net, path.display().to_string()))
+        }
+        None => {
+            let label = Path::new("<bundled models/default/model.safetensors>");
+            let net = VpNet::from_bytes(BUNDLED_MODEL, label, &device)
+                .context("loading the bundled VP network")?;
+            Ok((net, "bundled:models/default".to_string()))
+        }
+    }
+}
+
+/// Run frames -> detections -> filter -> crops -> network, returning per-vehicle records.
+pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
+    if a.batch == 0 {
+        bail!("--batch must be at least 1");
+    }
+    let options = SourceOptions {
+        every: a.every,
+        max_frames: a.max_frames,
+        start: a.start.unwrap_or_default(),
+        ..SourceOptions::default()
+    };
+    options
+        .validate()
+        .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;
+    let (net, model) = load_model(a.model.as_deref(), &a.device)?;
+    let mut source = vpcal_video::open_source(input, &options)
+        .with_context(|| format!("opening {}", input.display()))?;
+    let info = source.info().clone();
+    let mut detector: Box<dyn Detector> = match &a.detections {
+        Some(path) => {
+            if a.road_mask.is_some() {
+                bail!("--road-mask applies to the motion detector, not to --detections");
+            }
+            Box::new(FileDetector::open(path)?)
+        }
+        None => {
+            let mut d = MotionDetector::new(MotionConfig::default())?;
+            if let Some(mask) = &a.road_mask {
+                let m = vpcal_video::detect::motion::load_road_mask(mask)?;
+                if m.dimensions() != (info.width, info.height) {
+                    bail!(
+                        "--road-mask {}: {}x{} pixels, but the frames are {}x{}",
+                        mask.display(),
+                        m.width(),
+                        m.height(),
+                        info.width,
+                        info.height
+                    );
+                }
+                d = d.with_road_mask(m, mask.clone());
+            }
+            Box::new(d)
+        }
+    };
+    let detector_name = detector.name();
+    let mut filter = FrameFilter::new(FilterConfig {
+        min_score: Some(a.min_score),
+        drop_static: !a.keep_static,
+        max_per_frame: (a.max_per_frame > 0).then_some(a.max_per_frame),
+        ..FilterConfig::default()
+    });
+    let mut resizer = CropResizer::new(net.config().input_size as u32, CropFilter::default())?;
+    let crop_len = resizer.crop_len();
+
+    let expected = info.expected_frames(&options);
+    let pb = super::progress_bar(expected, "frames", a.quiet);
+    let t0 = Instant::now();
+    let mut stats = PipelineStats::default();
+    let mut records: Vec<VehicleRecord> = Vec::new();
+    // Crops waiting for a full batch, with (frame, score, box).
+    let mut pending: Vec<f32> = Vec::with_capacity(a.batch * crop_len);
+    let mut pending_meta: Vec<(u64, f32, BoxPx)> = Vec::with_capacity(a.batch);
+    let mut last_frame: Option<RgbImage> = None;
+    let flush = |pending: &mut Vec<f32>,
+                 meta: &mut Vec<(u64, f32, BoxPx)>,
+                 records: &mut Vec<VehicleRecord>|
+     -> Result<()> {
+        if meta.is_empty() {
+            return Ok(());
+        }
+        let preds = net.predict_prepared(pending)?;
+        for ((frame, score, crop_box), p) in meta.drain(..).zip(preds) {
+            let prediction = p.vp;
+            records.push(VehicleRecord {
+                frame,
+                score,
+                crop_box,
+                vp1: crop_box.frame_from_box(prediction.vp1),
+                vp2: crop_box.frame_from_box(prediction.vp2),
+                prediction,
+            });
+        }
+        pending.clear();
+        Ok(())
+    };
+    for frame in source.by_ref() {
+        let frame = frame.with_context(|| format!("reading {}", input.display()))?;
+        stats.frames += 1;
+        let dets = detector
+            .detect(&frame)
+            .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
+        stats.detections += dets.len() as u64;
+        let filtered = filter.apply(&frame, dets);
+        for (_, why) in &filtered.dropped {
+            match why {
+                DropReason::LowScore => stats.dropped_low_score += 1,
+                DropReason::Static => stats.dropped_static += 1,
+                DropReason::OverLimit => stats.dropped_over_limit += 1,
+                DropReason::OutsideFrame => stats.dropped_outside += 1,
+            }
+        }
+        if !filtered.kept.is_empty() {
+            let boxes: Vec<BoxPx> = filtered.kept.iter().map(|d| d.bbox).collect();
+            let batch = resizer.crop_batch(&frame.image, &boxes)?;
+            for (k, (&src, &bp)) in batch.source.iter().zip(&batch.boxes).enumerate() {
+                pending.extend_from_slice(&batch.images[k * crop_len..(k + 1) * crop_len]);
+                pending_meta.push((frame.index, filtered.kept[src].score, bp));
+                stats.crops += 1;
+                if pending_meta.len() >= a.batch {
+                    flush(&mut pending, &mut pending_meta, &mut records)?;
+                }
+            }
+        }
+        pb.inc(1);
+        let secs = t0.elapsed().as_secs_f64().max(1e-9);
+        pb.set_message(format!(
+            "{:.1} frames/s, {} vehicle boxes",
+            stats.frames as f64 / secs,
+            stats.crops
+        ));
+        last_frame = Some(frame.image);
+    }
+    flush(&mut pending, &mut pending_meta, &mut records)?;
+    pb.finish_and_clear();
+    for w in source.warnings() {
+        eprintln!("warning: {}: {w}", input.display());
+    }
+    if stats.frames == 0 {
+        bail!(
+            "{}: no frames to process (empty input, or --start/--max-frames select none)",
+            input.display()
+        );
+    }
+    stats.seconds = t0.elapsed().as_secs_f64();
+    let picture = last_frame;
+    Ok(PipelineOutput {
+        info,
+        detector: detector_name,
+        model,
+        records,
+        stats,
+        picture,
+    })
+}
+
+/// The principal point: `--pp` or the image centre.
+pub fn principal_point(a: &PipelineArgs, info: &SourceInfo) -> Point2 {
+    a.pp.unwrap_or(Point2 {
+        x: f64::from(info.width) / 2.0,
+        y: f64::from(info.height) / 2.0,
+    })
+}
+
+fn pt(p: Point2) -> Value {
+    if p.is_finite() {
+        json!([p.x, p.y])
+    } else {
+        Value::Null
+    }
+}
+
+/// The `calib.json` document of a successful calibration.
+pub fn calibration_json(
+    out: &PipelineOutput,
+    a: &PipelineArgs,
+    cal: &Calibration,
+    agg: &Aggregated,
+) -> Value {
+    let hz = cal.horizon.0;
+    json!({
+        "format": "vpcal-calibration/1",
+        "status": "calibrated",
+        "vpcal_version": env!("CARGO_PKG_VERSION"),
+        "input": input_json(out),
+        "image_size": [out.info.width, out.info.height],
+        "pp": pt(cal.pp),
+        "focal_px": cal.focal_px,
+        "K": cal.k(),
+        "R": cal.rotation,
+        "vp1": pt(cal.vp1),
+        "vp2": pt(cal.vp2),
+        "vp3": pt(cal.vp3),
+        "horizon": {
+            "line": hz,
+            "angle_deg": cal.horizon.angle().to_degrees(),
+        },
+        "road_normal": cal.road_normal,
+        "tilt_deg": cal.tilt().to_degrees(),
+        "roll_deg": cal.roll().to_degrees(),
+        "scale_m_per_unit": Value::Null,
+        "evidence": agg.evidence.clone(),
+        "confidence": agg.confidence.clone(),
+        "summary": agg.summary,
+        "settings": settings_json(out, a),
+    })
+}
+
+fn input_json(out: &PipelineOutput) -> Value {
+    json!({
+        "path": out.info.path.display().to_string(),
+        "width": out.info.width,
+        "height": out.info.height,
+        "fps": out.info.fps,
+        "codec": out.info.codec,
+        "frames_processed": out.stats.frames,
+        "detections": out.stats.detections,
+        "dropped": {
+            "low_score": out.stats.dropped_low_score,
+            "static": out.stats.dropped_static,
+            "over_limit": out.stats.dropped_over_limit,
+            "outside_frame": out.stats.dropped_outside,
+        },
+        "vehicle_boxes": out.stats.crops,
+        "seconds": out.stats.seconds,
+    })
+}
+
+fn settings_json(out: &PipelineOutput, a: &PipelineArgs) -> Value {
+    json!({
+        "model": out.model,
+        "device": a.device,
+        "detector": out.detector,
+        "every": a.every,
+        "max_frames": a.max_frames,
+        "start": a.start.map(|s| format!("{s:?}")),
+        "min_score": a.min_score,
+        "drop_static": !a.keep_static,
+        "max_per_frame": a.max_per_frame,
+        "method": a.method.name(),
+        "bootstrap": a.bootstrap,
+        "pp": a.pp.map(pt),
+    })
+}
+
+/// Aggregate the records of `out` into a camera.
+///
+/// # Errors
+/// "Not enough evidence" (or a degenerate camera) as an error message.
+pub fn calibrate(out: &PipelineOutput, a: &PipelineArgs) -> Result<(Calibration, Aggregated)> {
+    let pp = principal_point(a, &out.info);
+    let vehicles: Vec<VehicleVps> = out.records.iter().map(VehicleRecord::to_vehicle).collect();
+    let agg = aggregate(
+        &vehicles,
+        pp,
+        (out.info.width, out.info.height),
+        a.method,
+        f64::from(a.min_score),
+        a.bootstrap,
+    )?;
+    let cal = Calibration::from_vps(agg.vp1, agg.vp2, pp)
+        .map_err(|e| anyhow::anyhow!("the aggregated vanishing points give no camera: {e}"))?;
+    Ok((cal, agg))
+}
+
+/// Print the run's summary table on stderr.
+pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggregated)>) {
+    let s = &out.stats;
+    let row = |k: &str, v: String| eprintln!("  {k:<22} {v}");
+    eprintln!("vpcal calibrate: {}", out.info.path.display());
+    row(
+        "frames",
+        format!(
+            "{} processed ({}x{}) in {:.1} s, {:.1} frames/s",
+            s.frames,
+            out.info.width,
+            out.info.height,
+            s.seconds,
+            s.frames as f64 / s.seconds.max(1e-9)
+        ),
+    );
+    row("detector", out.detector.clone());
+    row(
+        "boxes",
+        format!(
+            "{} detected, {} kept (dropped: {} low score, {} static, {} over the per-frame limit)",
+            s.detections, s.crops, s.dropped_low_score, s.dropped_static, s.dropped_over_limit
+        ),
+    );
+    row("model", out.model.clone());
+    match result {
+        Ok((cal, agg)) => {
+            row("aggregation", agg.summary.clone());
+            row("focal length", format!("{:.1} px", cal.focal_px));
+            row(
+                "vp1, vp2",
+                format!(
+                    "({:.1}, {:.1}), ({:.1}, {:.1})",
+                    cal.vp1.x, cal.vp1.y, cal.vp2.x, cal.vp2.y
+                ),
+            );
+            row(
+                "horizon",
+                format!(
+                    "{:.2}° roll, camera tilt {:.2}° below the horizon",
+                    cal.horizon.angle().to_degrees(),
+                    cal.tilt().to_degrees()
+                ),
+            );
+        }
+        Err(e) => row("result", format!("NOT CALIBRATED: {e:#}")),
+    }
+}
+
+pub fn run(args: Args) -> Result<std::process::ExitCode> {
+    let out = run_pipeline(&args.input, &args.pipeline)?;
+    let result = calibrate(&out, &args.pipeline);
+    print_summary(&out, &result);
+    let (w, h) = (out.info.width, out.info.height);
+    if let Some(path) = &args.vehicles {
+        let items: Vec<VpOutItem> = out.records.iter().map(|r| r.to_vpout(w, h)).collect();
+        write_vpout(path, &items)?;
+    }
+    match result {
+        Ok((cal, agg)) => {
+            let doc = calibration_json(&out, &args.pipeline, &cal, &agg);
+            if let Some(path) = &args.output {
+                write_json_doc(path, &doc)?;
+            }
+            if let Some(path) = &args.bcs_json {
+                write_system(
+                    path,
+                    &SystemFile::new(SystemCalibration {
+                        vp1: cal.vp1,
+                        vp2: cal.vp2,
+                        pp: cal.pp,
+                        scale: 1.0,
+                    }),
+                )?;
+            }
+            if let Some(path) = &args.overlay {
+                let Some(picture) = &out.picture else {
+                    bail!("no frame to draw the overlay on");
+                };
+                let img = overlay::draw(picture, &cal, &out.records);
+                vpcal_video::draw::save_png(&img, path)?;
+            }
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&doc)?);
+            }
+            Ok(std::process::ExitCode::SUCCESS)
+        }
+        Err(e) => {
+            let doc = json!({
+                "format": "vpcal-calibration/1",
+                "status": "not_enough_evidence",
+                "reason": format!("{e:#}"),
+                "vpcal_version": env!("CARGO_PKG_VERSION"),
+                "input": input_json(&out),
+                "image_size": [w, h],
+                "settings": settings_json(&out, &args.pipeline),
+            });
+            if let Some(path) = &args.output {
+                write_json_doc(path, &doc)?;
+            }
+            if let Some(path) = &args.overlay {
+                if let Some(picture) = &out.picture {
+                    let img = overlay::draw_records_only(picture, &out.records);
+                    vpcal_video::draw::save_png(&img, path)?;
+                }
+            }
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&doc)?);
+            }
+            eprintln!("vpcal: not enough evidence for a calibration: {e:#}");
+            Ok(std::process::ExitCode::from(EXIT_NOT_ENOUGH_EVIDENCE))
+        }
+    }
+}
+
+/// Write a JSON document atomically (temp file, then rename), pretty-printed.
+pub fn write_json_doc(path: &Path, doc: &Value) -> Result<()> {
+    let mut bytes = serde_json::to_vec_pretty(doc)?;
+    bytes.push(b'\n');
+    write_atomic(path, &bytes)?;
+    Ok(())
+}

@@ -1,0 +1,183 @@
+//! `vpcal demo`: the whole method on a synthetic clip whose camera is known.
+//!
+//! Renders a seeded traffic scene (`vpcal-synth`), runs the `calibrate` pipeline on its video
+//! with the motion detector and the bundled model, and compares the result with the true
+//! camera: focal length, horizon, and the BrnoCompSpeed pure-calibration ratio error of the
+//! scene's ground-truth road distances.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use serde_json::json;
+use vpcal_formats::bcs::{read_gt, read_system, write_system, SystemCalibration, SystemFile};
+use vpcal_geom::camera::Calibration;
+use vpcal_geom::metrics::{ratio_errors, summarize};
+use vpcal_synth::scene::{render_scene, SceneSpec, WriteOptions};
+use vpcal_synth::world::LayoutKind;
+
+use super::calibrate::{self, write_json_doc, PipelineArgs};
+use super::overlay;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Output folder: the scene (dataset/, results/), calib.json, overlay.png, vehicles.json.
+    #[arg(long, default_value = "vpcal-demo")]
+    pub out: PathBuf,
+    /// Seed of the scene (camera, traffic, appearance).
+    #[arg(long, default_value_t = 3)]
+    pub seed: u64,
+    /// Road layout: highway, curve, intersection or parking.
+    #[arg(long, default_value = "highway", value_parser = parse_layout)]
+    pub layout: LayoutKind,
+    /// Frames to render (25 frames/s).
+    #[arg(long, default_value_t = 300)]
+    pub frames: u32,
+    /// Frame size WxH.
+    #[arg(long, value_parser = super::args::size, default_value = "1280x720")]
+    pub size: (u32, u32),
+    /// Use the scene's true vehicle boxes instead of the motion detector.
+    #[arg(long)]
+    pub true_boxes: bool,
+    #[command(flatten)]
+    pub pipeline: PipelineArgs,
+}
+
+fn parse_layout(s: &str) -> Result<LayoutKind, String> {
+    s.parse()
+}
+
+pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
+    let name = format!("demo_{}_s{}", a.layout.name(), a.seed);
+    let mut spec = SceneSpec::new(&name, a.layout, a.seed);
+    spec.frames = a.frames;
+    spec.width = a.size.0;
+    spec.height = a.size.1;
+    spec.validate()?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+
+    eprintln!(
+        "rendering {} frames of a {} scene (seed {}) into {}",
+        a.frames,
+        a.layout.name(),
+        a.seed,
+        a.out.display()
+    );
+    let pb = super::progress_bar(Some(u64::from(a.frames)), "render", a.pipeline.quiet);
+    let summary = render_scene(
+        &spec,
+        &a.out,
+        WriteOptions {
+            video: true,
+            frames_dir: false,
+        },
+        &|n| pb.set_position(u64::from(n)),
+    )?;
+    pb.finish_and_clear();
+    eprintln!(
+        "rendered in {:.1} s ({:.1} frames/s)",
+        summary.render_s,
+        f64::from(summary.frames) / summary.render_s.max(1e-9)
+    );
+    let dataset = a.out.join("dataset").join(&name);
+    let results = a.out.join("results").join(&name);
+    let video = dataset.join("video.mp4");
+    if a.true_boxes {
+        a.pipeline.detections = Some(dataset.join("detections.csv"));
+    }
+    // The synthetic camera's principal point is the image centre, the pipeline's default.
+    let out = calibrate::run_pipeline(&video, &a.pipeline)?;
+    let result = calibrate::calibrate(&out, &a.pipeline);
+    calibrate::print_summary(&out, &result);
+
+    let truth_sys = read_system(&results.join("system_groundtruth.json"))?;
+    let t = &truth_sys.calibration;
+    let truth = Calibration::from_vps(t.vp1, t.vp2, t.pp)
+        .map_err(|e| anyhow::anyhow!("the scene's true camera: {e}"))?;
+    let gt = read_gt(&dataset)?;
+    let measurements = gt.road_measurements();
+
+    let (cal, agg) = match result {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("vpcal demo: not enough evidence for a calibration: {e:#}");
+            return Ok(std::process::ExitCode::from(
+                calibrate::EXIT_NOT_ENOUGH_EVIDENCE,
+            ));
+        }
+    };
+    let ratio = ratio_errors(&cal, &measurements)
+        .and_then(|v| summarize(&v))
+        .context("the ground-truth road points cannot be projected with the estimate")?;
+    let horizon_diff = {
+        let d = (cal.horizon.angle() - truth.horizon.angle()).to_degrees();
+        // Lines have no direction: fold into (-90, 90].
+        (d + 90.0).rem_euclid(180.0) - 90.0
+    };
+    // Horizon height at the image centre, as a fraction of the image height.
+    let cx = f64::from(out.info.width) / 2.0;
+    let hy = |c: &Calibration| c.horizon.y_at(cx).unwrap_or(f64::NAN);
+    let focal_err = (cal.focal_px / truth.focal_px - 1.0) * 100.0;
+
+    let mut doc = calibrate::calibration_json(&out, &a.pipeline, &cal, &agg);
+    if let Some(obj) = doc.as_object_mut() {
+        obj.insert(
+            "demo".into(),
+            json!({
+                "scene": name,
+                "true_focal_px": truth.focal_px,
+                "focal_error_pct": focal_err,
+                "true_vp1": [truth.vp1.x, truth.vp1.y],
+                "true_vp2": [truth.vp2.x, truth.vp2.y],
+                "horizon_angle_error_deg": horizon_diff,
+                "horizon_y_at_centre": hy(&cal),
+                "true_horizon_y_at_centre": hy(&truth),
+                "bcs_ratio_error_pct": {
+                    "mean": ratio.mean, "median": ratio.median, "p95": ratio.p95,
+                    "max": ratio.max, "pairs": ratio.n,
+                },
+            }),
+        );
+    }
+    write_json_doc(&a.out.join("calib.json"), &doc)?;
+    write_system(
+        &results.join("system_vpcal.json"),
+        &SystemFile::new(SystemCalibration {
+            vp1: cal.vp1,
+            vp2: cal.vp2,
+            pp: cal.pp,
+            scale: 1.0,
+        }),
+    )?;
+    let overlay_path = a.out.join("overlay.png");
+    if let Some(picture) = &out.picture {
+        vpcal_video::draw::save_png(&overlay::draw(picture, &cal, &out.records), &overlay_path)?;
+    }
+
+    println!();
+    println!("                      estimate      truth");
+    println!(
+        "focal length (px)   {:>10.1} {:>10.1}   ({focal_err:+.1} %)",
+        cal.focal_px, truth.focal_px
+    );
+    println!(
+        "horizon angle (deg) {:>10.2} {:>10.2}   ({horizon_diff:+.2}°)",
+        cal.horizon.angle().to_degrees(),
+        truth.horizon.angle().to_degrees()
+    );
+    println!(
+        "horizon y at centre {:>10.1} {:>10.1}",
+        hy(&cal),
+        hy(&truth)
+    );
+    println!(
+        "BCS ratio error: mean {:.2} %, median {:.2} %, p95 {:.2} %, max {:.2} % over {} distance pairs",
+        ratio.mean, ratio.median, ratio.p95, ratio.max, ratio.n
+    );
+    println!(
+        "wrote {}, {} and {}",
+        a.out.join("calib.json").display(),
+        overlay_path.display(),
+        results.join("system_vpcal.json").display()
+    );
+    Ok(std::process::ExitCode::SUCCESS)
+}

@@ -1,0 +1,201 @@
+//! `vpcal scale` and `vpcal measure`: metric distances on the road plane of a calibration.
+//!
+//! A calibration from vanishing points fixes the road plane up to scale (DESIGN.md §3: the
+//! BrnoCompSpeed back-projection onto `n·X + 10 = 0`). One known distance between two road
+//! points fixes the scale (`scale_m_per_unit`); then any pair of pixels on the road has a
+//! distance in metres.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use serde_json::Value;
+use vpcal_geom::camera::Calibration;
+use vpcal_geom::Point2;
+
+use super::calibrate::write_json_doc;
+
+/// Two road points in pixels, `x1,y1,x2,y2`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointPair(pub Point2, pub Point2);
+
+fn parse_pair(s: &str) -> Result<PointPair, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .ok_or_else(|| format!("expected x1,y1,x2,y2 (finite numbers), got {s:?}"))?;
+    let [x1, y1, x2, y2] = v[..] else {
+        return Err(format!(
+            "expected 4 numbers x1,y1,x2,y2, got {} in {s:?}",
+            v.len()
+        ));
+    };
+    Ok(PointPair(Point2::new(x1, y1), Point2::new(x2, y2)))
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ScaleArgs {
+    /// A calibration written by `vpcal calibrate -o`.
+    pub calib: PathBuf,
+    /// The two ends of the known distance, in pixels, on the road: x1,y1,x2,y2.
+    #[arg(long, value_parser = parse_pair, allow_hyphen_values = true)]
+    pub points: PointPair,
+    /// The distance between them on the road, in metres.
+    #[arg(long)]
+    pub distance: f64,
+    /// Write the scaled calibration here (default: update CALIB in place, atomically).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct MeasureArgs {
+    /// A calibration written by `vpcal calibrate -o` (with `vpcal scale` for metres).
+    pub calib: PathBuf,
+    /// Pixel pairs on the road, x1,y1,x2,y2; repeat for several distances.
+    #[arg(long, value_parser = parse_pair, required = true, allow_hyphen_values = true)]
+    pub points: Vec<PointPair>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A calibration file: its JSON and the camera it describes.
+struct CalibFile {
+    doc: Value,
+    cal: Calibration,
+    scale: Option<f64>,
+}
+
+fn read_calib(path: &Path) -> Result<CalibFile> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let doc: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a JSON calibration", path.display()))?;
+    if let Some(status) = doc.get("status").and_then(Value::as_str) {
+        if status != "calibrated" {
+            bail!(
+                "{}: status is {status:?}, not \"calibrated\": this run produced no camera",
+                path.display()
+            );
+        }
+    }
+    let point = |field: &str| -> Result<Point2> {
+        let v = doc
+            .get(field)
+            .and_then(Value::as_array)
+            .filter(|a| a.len() == 2)
+            .and_then(|a| Some(Point2::new(a[0].as_f64()?, a[1].as_f64()?)))
+            .filter(|p| p.is_finite());
+        v.with_context(|| {
+            format!(
+                "{}: field {field:?} must be [x, y] (finite numbers)",
+                path.display()
+            )
+        })
+    };
+    let (vp1, vp2, pp) = (point("vp1")?, point("vp2")?, point("pp")?);
+    let cal = Calibration::from_vps(vp1, vp2, pp)
+        .map_err(|e| anyhow::anyhow!("{}: vp1, vp2 and pp give no camera: {e}", path.display()))?;
+    let scale = match doc.get("scale_m_per_unit") {
+        None | Some(Value::Null) => None,
+        Some(v) => Some(
+            v.as_f64()
+                .filter(|s| s.is_finite() && *s > 0.0)
+                .with_context(|| {
+                    format!(
+                        "{}: scale_m_per_unit must be a positive number",
+                        path.display()
+                    )
+                })?,
+        ),
+    };
+    Ok(CalibFile { doc, cal, scale })
+}
+
+pub fn run_scale(a: ScaleArgs) -> Result<()> {
+    if !(a.distance.is_finite() && a.distance > 0.0) {
+        bail!(
+            "--distance {} must be a positive number of metres",
+            a.distance
+        );
+    }
+    let mut f = read_calib(&a.calib)?;
+    let PointPair(p1, p2) = a.points;
+    for p in [p1, p2] {
+        if !f.cal.sees_road(p) {
+            bail!(
+                "--points: pixel ({}, {}) is above the horizon: it does not see the road",
+                p.x,
+                p.y
+            );
+        }
+    }
+    let scale = f
+        .cal
+        .scale_from_distance(p1, p2, a.distance)
+        .with_context(|| {
+            "--points: the two pixels coincide on the road (or a ray misses the road plane)"
+        })?;
+    let obj = f
+        .doc
+        .as_object_mut()
+        .with_context(|| format!("{}: not a JSON object", a.calib.display()))?;
+    obj.insert("scale_m_per_unit".into(), scale.into());
+    obj.insert(
+        "scale_reference".into(),
+        serde_json::json!({
+            "points": [[p1.x, p1.y], [p2.x, p2.y]],
+            "distance_m": a.distance,
+        }),
+    );
+    let out = a.output.as_deref().unwrap_or(&a.calib);
+    write_json_doc(out, &f.doc)?;
+    println!("scale {scale:.6} m per road unit -> {}", out.display());
+    Ok(())
+}
+
+pub fn run_measure(a: MeasureArgs) -> Result<()> {
+    let f = read_calib(&a.calib)?;
+    if f.scale.is_none() {
+        eprintln!(
+            "warning: {} has no metric scale (run `vpcal scale`): distances are in road-plane units",
+            a.calib.display()
+        );
+    }
+    let unit = if f.scale.is_some() { "m" } else { "units" };
+    let mut rows = Vec::new();
+    for PointPair(p1, p2) in &a.points {
+        let d = if f.cal.sees_road(*p1) && f.cal.sees_road(*p2) {
+            f.cal
+                .road_distance(*p1, *p2)
+                .map(|d| d * f.scale.unwrap_or(1.0))
+        } else {
+            None
+        };
+        rows.push((*p1, *p2, d));
+    }
+    if a.json {
+        let v: Vec<Value> = rows
+            .iter()
+            .map(|(p1, p2, d)| {
+                serde_json::json!({"points": [[p1.x, p1.y], [p2.x, p2.y]], "distance": d, "unit": unit})
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        for (p1, p2, d) in &rows {
+            match d {
+                Some(d) => println!(
+                    "({:.1}, {:.1}) - ({:.1}, {:.1}): {d:.3} {unit}",
+                    p1.x, p1.y, p2.x, p2.y
+                ),
+                None => println!(
+                    "({:.1}, {:.1}) - ({:.1}, {:.1}): not on the road (above the horizon)",
+                    p1.x, p1.y, p2.x, p2.y
+                ),
+            }
+        }
+    }
+    Ok(())
+}

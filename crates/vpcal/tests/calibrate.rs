@@ -1,0 +1,287 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! End-to-end tests of `vpcal calibrate`, `demo`, `scale` and `measure`. Tests on the real
+//! clips in `VPCAL_DATA` (default `../shared/data`) skip with a message when it is absent.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn vpcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vpcal"))
+        .args(args)
+        .output()
+        .expect("run vpcal")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+fn traffic_video() -> Option<PathBuf> {
+    let dir = std::env::var_os("VPCAL_DATA").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
+        PathBuf::from,
+    );
+    let dir = dir.join("traffic_video");
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        eprintln!("skipping: {} not found (set VPCAL_DATA)", dir.display());
+        None
+    }
+}
+
+fn read_json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+/// Files in `dir` (to check that no temporary file is left behind).
+fn names(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn calibrate_a_real_clip_writes_consistent_outputs() {
+    let Some(dir) = traffic_video() else { return };
+    let clip = dir.join("bgslibrary_video02_highway_cam_320x240.avi");
+    let out = tempfile::tempdir().unwrap();
+    let o = |n: &str| out.path().join(n).to_str().unwrap().to_string();
+    let r = vpcal(&[
+        "calibrate",
+        clip.to_str().unwrap(),
+        "-o",
+        &o("calib.json"),
+        "--overlay",
+        &o("overlay.png"),
+        "--vehicles",
+        &o("vehicles.json"),
+        "--bcs-json",
+        &o("system.json"),
+        "--max-frames",
+        "120",
+        "--quiet",
+    ]);
+    let code = r.status.code().unwrap();
+    assert!(code == 0 || code == 3, "exit {code}: {}", text(&r));
+    assert!(text(&r).contains("120 processed (320x240)"), "{}", text(&r));
+    let calib = read_json(&out.path().join("calib.json"));
+    assert_eq!(calib["format"], "vpcal-calibration/1");
+    assert_eq!(calib["image_size"], serde_json::json!([320, 240]));
+    assert_eq!(calib["input"]["frames_processed"], 120);
+    // Every kept box became one vehicle record (VPout JSON, with Infinity/NaN tokens).
+    let vehicles = vpcal_formats::reference::read_vpout(&out.path().join("vehicles.json")).unwrap();
+    assert_eq!(
+        vehicles.len() as u64,
+        calib["input"]["vehicle_boxes"].as_u64().unwrap()
+    );
+    if code == 0 {
+        assert_eq!(calib["status"], "calibrated");
+        let f = calib["focal_px"].as_f64().unwrap();
+        assert!(f.is_finite() && f > 0.0);
+        assert_eq!(calib["K"][0][0].as_f64().unwrap(), f);
+        let img = image::open(out.path().join("overlay.png")).unwrap();
+        assert_eq!((img.width(), img.height()), (320, 240));
+        let sys = read_json(&out.path().join("system.json"));
+        assert_eq!(sys["camera_calibration"]["vp1"], calib["vp1"]);
+    } else {
+        assert_eq!(calib["status"], "not_enough_evidence");
+        assert!(!out.path().join("system.json").exists());
+    }
+    assert!(
+        names(out.path()).iter().all(|n| !n.contains("tmp")),
+        "{:?}",
+        names(out.path())
+    );
+}
+
+#[test]
+fn calibrate_refuses_bad_input_without_leaving_files() {
+    let out = tempfile::tempdir().unwrap();
+    let calib = out.path().join("calib.json");
+    let missing = out.path().join("no_such_video.mp4");
+    let r = vpcal(&[
+        "calibrate",
+        missing.to_str().unwrap(),
+        "-o",
+        calib.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(text(&r).contains("no_such_video.mp4"), "{}", text(&r));
+    // An empty folder has no frames.
+    let empty = out.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let r = vpcal(&[
+        "calibrate",
+        empty.to_str().unwrap(),
+        "-o",
+        calib.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(text(&r).contains("empty"), "{}", text(&r));
+    // A model file that is not a network.
+    let junk = out.path().join("junk.safetensors");
+    std::fs::write(&junk, b"not weights").unwrap();
+    let img = out.path().join("frame.png");
+    image::RgbImage::new(64, 48).save(&img).unwrap();
+    let r = vpcal(&[
+        "calibrate",
+        img.to_str().unwrap(),
+        "--model",
+        junk.to_str().unwrap(),
+        "-o",
+        calib.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(text(&r).contains("junk.safetensors"), "{}", text(&r));
+    assert!(!calib.exists());
+    // --every 0 is refused by the frame selection.
+    let r = vpcal(&["calibrate", img.to_str().unwrap(), "--every", "0"]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(text(&r).contains("every"), "{}", text(&r));
+}
+
+#[test]
+fn a_still_image_without_motion_is_not_enough_evidence() {
+    let out = tempfile::tempdir().unwrap();
+    let img = out.path().join("frame.png");
+    image::RgbImage::from_fn(160, 120, |x, y| {
+        image::Rgb([(x % 256) as u8, (y % 256) as u8, 80])
+    })
+    .save(&img)
+    .unwrap();
+    let calib = out.path().join("calib.json");
+    let r = vpcal(&[
+        "calibrate",
+        img.to_str().unwrap(),
+        "-o",
+        calib.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_eq!(r.status.code(), Some(3), "{}", text(&r));
+    assert!(text(&r).contains("not enough evidence"), "{}", text(&r));
+    let doc = read_json(&calib);
+    assert_eq!(doc["status"], "not_enough_evidence");
+    assert!(doc["reason"].as_str().unwrap().len() > 10);
+}
+
+/// A camera with f = 1000 px, pp (640, 360), horizon y = 0: vp1 (840, 0), vp2 (-5008, 0)
+/// satisfy (vp1 - pp)·(vp2 - pp) = -f².
+fn write_known_calib(path: &Path) {
+    let doc = serde_json::json!({
+        "format": "vpcal-calibration/1",
+        "status": "calibrated",
+        "image_size": [1280, 720],
+        "pp": [640.0, 360.0],
+        "vp1": [840.0, 0.0],
+        "vp2": [-5008.0, 0.0],
+        "focal_px": 1000.0,
+        "scale_m_per_unit": null,
+    });
+    std::fs::write(path, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
+}
+
+#[test]
+fn scale_then_measure_gives_metres_on_the_road() {
+    let dir = tempfile::tempdir().unwrap();
+    let calib = dir.path().join("calib.json");
+    write_known_calib(&calib);
+    let c = calib.to_str().unwrap();
+    // Without a scale, distances are in plane units, with a warning.
+    let r = vpcal(&["measure", c, "--points", "600,500,700,650"]);
+    assert!(r.status.success(), "{}", text(&r));
+    assert!(text(&r).contains("units") && text(&r).contains("no metric scale"));
+
+    let r = vpcal(&[
+        "scale",
+        c,
+        "--points",
+        "600,500,700,650",
+        "--distance",
+        "12.5",
+    ]);
+    assert!(r.status.success(), "{}", text(&r));
+    let doc = read_json(&calib);
+    assert!(doc["scale_m_per_unit"].as_f64().unwrap() > 0.0);
+    assert_eq!(doc["scale_reference"]["distance_m"], 12.5);
+
+    let r = vpcal(&[
+        "measure",
+        c,
+        "--points",
+        "600,500,700,650",
+        "--points",
+        "700,650,600,500",
+        "--points",
+        "10,-50,20,600",
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", text(&r));
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    for k in 0..2 {
+        let d = v[k]["distance"].as_f64().unwrap();
+        assert!((d - 12.5).abs() < 1e-9, "{d}");
+        assert_eq!(v[k]["unit"], "m");
+    }
+    // A point above the horizon does not see the road.
+    assert!(v[2]["distance"].is_null());
+
+    // Scaling from a pixel above the horizon is refused and leaves the file as it was.
+    let before = std::fs::read(&calib).unwrap();
+    let r = vpcal(&["scale", c, "--points", "600,-20,700,650", "--distance", "3"]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(text(&r).contains("horizon"), "{}", text(&r));
+    assert_eq!(std::fs::read(&calib).unwrap(), before);
+    // Malformed files name the field.
+    std::fs::write(
+        dir.path().join("bad.json"),
+        r#"{"vp1": [1, 2], "pp": [0, 0]}"#,
+    )
+    .unwrap();
+    let r = vpcal(&[
+        "measure",
+        dir.path().join("bad.json").to_str().unwrap(),
+        "--points",
+        "1,2,3,4",
+    ]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(text(&r).contains("\"vp2\""), "{}", text(&r));
+}
+
+#[test]
+fn demo_renders_calibrates_and_compares_with_the_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let r = vpcal(&[
+        "demo",
+        "--out",
+        out.to_str().unwrap(),
+        "--frames",
+        "40",
+        "--size",
+        "320x240",
+        "--true-boxes",
+        "--bootstrap",
+        "0",
+        "--quiet",
+    ]);
+    let code = r.status.code().unwrap();
+    assert!(code == 0 || code == 3, "exit {code}: {}", text(&r));
+    assert!(out.join("dataset/demo_highway_s3/video.mp4").is_file());
+    if code == 0 {
+        let doc = read_json(&out.join("calib.json"));
+        let truth = doc["demo"]["true_focal_px"].as_f64().unwrap();
+        assert!(truth > 100.0);
+        let ratio = doc["demo"]["bcs_ratio_error_pct"]["mean"].as_f64().unwrap();
+        assert!(ratio.is_finite() && ratio >= 0.0);
+        assert!(text(&r).contains("BCS ratio error"), "{}", text(&r));
+        assert!(out.join("overlay.png").is_file());
+    }
+}
