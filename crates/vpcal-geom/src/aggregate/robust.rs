@@ -84,6 +84,12 @@ pub struct RobustOptions {
     pub seed: u64,
     /// Fewer effective vehicles than this is "not enough evidence".
     pub min_effective_vehicles: f64,
+    /// Fit on at most this many vehicles: larger inputs are thinned to an evenly spaced
+    /// subsample (in input order, weights rescaled to the full total) for the fits, while the
+    /// evidence counts use every vehicle. Thousands of vehicles already pin the estimate far
+    /// below the networks' systematic errors; this bounds the time (100 000 pairs well under
+    /// a second).
+    pub max_fit_vehicles: usize,
 }
 
 impl Default for RobustOptions {
@@ -105,6 +111,7 @@ impl Default for RobustOptions {
             bootstrap: 30,
             seed: 0,
             min_effective_vehicles: 10.0,
+            max_fit_vehicles: 2000,
         }
     }
 }
@@ -217,6 +224,36 @@ struct Prepared {
     repeated: usize,
 }
 
+impl Prepared {
+    /// At most `max` vehicles, evenly spaced in input order, with weights rescaled so that
+    /// their total equals the full total.
+    fn thinned(&self, max: usize) -> Prepared {
+        let n = self.centre.len();
+        if max == 0 || n <= max {
+            return self.clone();
+        }
+        let idx: Vec<usize> = (0..max).map(|k| k * n / max).collect();
+        let pick = |v: &Vec<Point2>| idx.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let pickf = |v: &Vec<f64>| idx.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let total: f64 = self.weight.iter().sum();
+        let mut weight = pickf(&self.weight);
+        let sub: f64 = weight.iter().sum();
+        if sub > 0.0 {
+            weight.iter_mut().for_each(|w| *w *= total / sub);
+        }
+        Prepared {
+            centre: pick(&self.centre),
+            dir1: pick(&self.dir1),
+            angle2: pickf(&self.angle2),
+            vp1: pick(&self.vp1),
+            vp2: pick(&self.vp2),
+            weight,
+            spread1: pickf(&self.spread1),
+            repeated: self.repeated,
+        }
+    }
+}
+
 fn unit(v: Point2) -> Option<Point2> {
     let n = v.norm();
     (n > 0.0 && n.is_finite()).then(|| v / n)
@@ -269,42 +306,86 @@ impl<'a> BoxGrid<'a> {
     }
 }
 
+/// How far (in median frame steps) the stationary-box count looks back and ahead.
+const REPEAT_WINDOW_STEPS: f64 = 100.0;
+
 /// For each box, how many boxes share its place: the number of *stationary* boxes overlapping
-/// it with IoU above `iou` (itself included), or 1 for a moving box.
+/// it with IoU above `iou` (itself included) within [`REPEAT_WINDOW_STEPS`] frame steps, or 1
+/// for a moving box.
 ///
 /// A box is stationary when a box of a neighbouring frame (at most 1.5 median frame steps
 /// away) overlaps it with IoU above `iou`: a parked vehicle or a static false detection. Cars
 /// that pass the same spot at different times are not. Without frame numbers every box
-/// counts as stationary (the conservative choice).
+/// counts as stationary (the conservative choice) and is compared with every other box
+/// without a frame number.
+///
+/// Boxes are bucketed by (frame, grid cell), so the work grows with the boxes per frame and
+/// the window, not with the square of the number of boxes.
 fn repeat_counts(boxes: &[BoxPx], frames: &[Option<f64>], iou: f64) -> Vec<usize> {
     let n = boxes.len();
     let mut distinct: Vec<f64> = frames.iter().flatten().copied().collect();
     distinct.sort_by(f64::total_cmp);
     distinct.dedup();
     let steps: Vec<f64> = distinct.windows(2).map(|w| w[1] - w[0]).collect();
-    let max_gap = if steps.is_empty() {
+    let median_step = if steps.is_empty() {
         0.0
     } else {
         let mut s = steps.clone();
         s.sort_by(f64::total_cmp);
-        1.5 * s[s.len() / 2]
+        s[s.len() / 2]
     };
-    let all = BoxGrid::new(boxes, |_| true);
+    let max_gap = 1.5 * median_step;
+    let window = REPEAT_WINDOW_STEPS * median_step;
+    let key = |b: &BoxPx| BoxGrid::key(b.center());
+    // Per grid cell, the (frame, box) entries sorted by frame.
+    let mut cells: std::collections::HashMap<(i64, i64), Vec<(f64, usize)>> =
+        std::collections::HashMap::new();
+    for (i, b) in boxes.iter().enumerate() {
+        if let Some(f) = frames[i] {
+            cells.entry(key(b)).or_default().push((f, i));
+        }
+    }
+    for v in cells.values_mut() {
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    // Boxes with a frame in [lo, hi] overlapping box `i` above `iou`, among those `keep`
+    // accepts.
+    let overlapping_in = |i: usize, lo: f64, hi: f64, keep: &dyn Fn(usize) -> bool| -> usize {
+        let b = boxes[i];
+        let (kx, ky) = key(&b);
+        let rx = (b.width() / 2.0 / BoxGrid::CELL).ceil() as i64 + 1;
+        let ry = (b.height() / 2.0 / BoxGrid::CELL).ceil() as i64 + 1;
+        let mut count = 0;
+        for gx in kx - rx..=kx + rx {
+            for gy in ky - ry..=ky + ry {
+                if let Some(v) = cells.get(&(gx, gy)) {
+                    let start = v.partition_point(|e| e.0 < lo);
+                    count += v[start..]
+                        .iter()
+                        .take_while(|e| e.0 <= hi)
+                        .filter(|e| keep(e.1) && b.iou(&boxes[e.1]) > iou)
+                        .count();
+                }
+            }
+        }
+        count
+    };
+    let frameless_set: Vec<bool> = frames.iter().map(Option::is_none).collect();
+    let still_frameless = BoxGrid::new(boxes, |i| frameless_set[i]);
     let stationary: Vec<bool> = (0..n)
         .map(|i| match frames[i] {
             None => true,
-            Some(fi) => all
-                .overlapping(i, iou)
-                .any(|j| frames[j].is_some_and(|fj| fj != fi && (fj - fi).abs() <= max_gap)),
+            Some(f) => overlapping_in(i, f - max_gap, f + max_gap, &|j| frames[j] != Some(f)) > 0,
         })
         .collect();
-    let still = BoxGrid::new(boxes, |i| stationary[i]);
     (0..n)
         .map(|i| {
-            if stationary[i] {
-                still.overlapping(i, iou).count().max(1)
-            } else {
-                1
+            if !stationary[i] {
+                return 1;
+            }
+            match frames[i] {
+                None => still_frameless.overlapping(i, iou).count().max(1),
+                Some(f) => overlapping_in(i, f - window, f + window, &|j| stationary[j]).max(1),
             }
         })
         .collect()
@@ -777,18 +858,19 @@ pub fn aggregate(
             "invalid image size {width}x{height} or principal point {pp:?}"
         )));
     }
-    let prep = prepare(pairs, opts, height);
-    let effective: f64 = prep.weight.iter().sum();
-    if prep.centre.len() < 2 || effective < opts.min_effective_vehicles {
+    let full = prepare(pairs, opts, height);
+    let effective: f64 = full.weight.iter().sum();
+    if full.centre.len() < 2 || effective < opts.min_effective_vehicles {
         return Err(not_enough(format!(
             "{} usable vehicles (effective weight {effective:.1}) of {} pairs; at least {} needed \
              (a pair needs score > {}, finite VPs and a box)",
-            prep.centre.len(),
+            full.centre.len(),
             pairs.len(),
             opts.min_effective_vehicles,
             opts.min_score
         )));
     }
+    let prep = full.thinned(opts.max_fit_vehicles);
     let mut rng = SplitMix(opts.seed ^ 0x5EED_CA1B);
     let w1: Vec<f64> = prep
         .weight
@@ -828,10 +910,10 @@ pub fn aggregate(
         )
     })?;
     let s1 = opts.vp1_threshold_deg.to_radians().sin();
-    let vp1_inliers = prep
+    let vp1_inliers = full
         .centre
         .iter()
-        .zip(&prep.dir1)
+        .zip(&full.dir1)
         .filter(|(c, d)| sin_angle(p1, **c, **d).abs() < s1)
         .count();
     if vp1_inliers < 5 {
@@ -857,10 +939,10 @@ pub fn aggregate(
     let calibration = Calibration::from_vps(vp1, vp2, pp)
         .map_err(|e| not_enough(format!("the estimate is not a valid camera: {e}")))?;
     let s2 = opts.ray_scale_deg.to_radians();
-    let vp2_inliers = prep
+    let vp2_inliers = full
         .centre
         .iter()
-        .zip(&prep.angle2)
+        .zip(&full.angle2)
         .filter(|(c, a)| {
             let d = (vp1 - **c) * u + h;
             line_angle_diff(**a - d.y.atan2(d.x) - x[2]).abs() < 3.0 * s2
@@ -868,7 +950,7 @@ pub fn aggregate(
         .count();
     let evidence = Evidence {
         pairs_in: pairs.len(),
-        pairs_used: prep.centre.len(),
+        pairs_used: full.centre.len(),
         effective_vehicles: effective,
         repeated_boxes: prep.repeated,
         vp1_inliers,
