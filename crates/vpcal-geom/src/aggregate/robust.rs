@@ -859,7 +859,8 @@ pub fn aggregate(
         )));
     }
     let full = prepare(pairs, opts, height);
-    let effective: f64 = full.weight.iter().sum();
+    // `+ 0.0` turns an empty sum's -0.0 into 0.0 for the messages.
+    let effective: f64 = full.weight.iter().sum::<f64>() + 0.0;
     if full.centre.len() < 2 || effective < opts.min_effective_vehicles {
         return Err(not_enough(format!(
             "{} usable vehicles (effective weight {effective:.1}) of {} pairs; at least {} needed \

@@ -99,7 +99,7 @@ pub struct PipelineArgs {
     pub road_mask: Option<PathBuf>,
     /// Drop boxes whose detector score is not above this.
     #[arg(long, default_value_t = 0.1)]
-    pub min_score: f32,
+    pub min_score: f64,
     /// Keep vehicles that do not move between processed frames (the reference drops them).
     #[arg(long)]
     pub keep_static: bool,
@@ -270,7 +270,7 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     };
     let detector_name = detector.name();
     let mut filter = FrameFilter::new(FilterConfig {
-        min_score: Some(a.min_score),
+        min_score: Some(a.min_score as f32),
         drop_static: !a.keep_static,
         max_per_frame: (a.max_per_frame > 0).then_some(a.max_per_frame),
         ..FilterConfig::default()
@@ -470,7 +470,7 @@ pub fn calibrate(out: &PipelineOutput, a: &PipelineArgs) -> Result<(Calibration,
         pp,
         (out.info.width, out.info.height),
         a.method,
-        f64::from(a.min_score),
+        a.min_score,
         a.bootstrap,
     )?;
     let cal = Calibration::from_vps(agg.vp1, agg.vp2, pp)
