@@ -94,6 +94,14 @@ pub struct PipelineArgs {
     /// detections.json, or CSV/JSON rows of frame, box, score (see vpcal-video docs).
     #[arg(long, value_name = "FILE")]
     pub detections: Option<PathBuf>,
+    /// A learned vehicle detector: an ONNX model file (e.g. an exported YOLO), run by tract.
+    #[cfg(feature = "onnx")]
+    #[arg(long, value_name = "FILE", conflicts_with = "detections")]
+    pub onnx: Option<PathBuf>,
+    /// Output layout of the --onnx model: yolo (v8/11), yolov5 or boxes-scores.
+    #[cfg(feature = "onnx")]
+    #[arg(long, default_value = "yolo", value_parser = parse_layout)]
+    pub onnx_layout: vpcal_video::detect::OnnxLayout,
     /// Road mask for the motion detector (white = road), e.g. BrnoCompSpeed's video_mask.png.
     #[arg(long, value_name = "PNG")]
     pub road_mask: Option<PathBuf>,
@@ -118,6 +126,12 @@ pub struct PipelineArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+#[cfg(feature = "onnx")]
+fn parse_layout(s: &str) -> Result<vpcal_video::detect::OnnxLayout, String> {
+    s.parse()
+        .map_err(|e: vpcal_video::VideoError| e.to_string())
 }
 
 fn parse_start(s: &str) -> Result<Start, String> {
@@ -242,32 +256,7 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     let mut source = vpcal_video::open_source(input, &options)
         .with_context(|| format!("opening {}", input.display()))?;
     let info = source.info().clone();
-    let mut detector: Box<dyn Detector> = match &a.detections {
-        Some(path) => {
-            if a.road_mask.is_some() {
-                bail!("--road-mask applies to the motion detector, not to --detections");
-            }
-            Box::new(FileDetector::open(path)?)
-        }
-        None => {
-            let mut d = MotionDetector::new(MotionConfig::default())?;
-            if let Some(mask) = &a.road_mask {
-                let m = vpcal_video::detect::motion::load_road_mask(mask)?;
-                if m.dimensions() != (info.width, info.height) {
-                    bail!(
-                        "--road-mask {}: {}x{} pixels, but the frames are {}x{}",
-                        mask.display(),
-                        m.width(),
-                        m.height(),
-                        info.width,
-                        info.height
-                    );
-                }
-                d = d.with_road_mask(m, mask.clone());
-            }
-            Box::new(d)
-        }
-    };
+    let mut detector = open_detector(a, &info)?;
     let detector_name = detector.name();
     let mut filter = FrameFilter::new(FilterConfig {
         min_score: Some(a.min_score as f32),
@@ -367,6 +356,46 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
         stats,
         picture,
     })
+}
+
+/// The detector the flags ask for: a detections file, an ONNX model (feature `onnx`) or the
+/// motion detector (default, with an optional road mask).
+fn open_detector(a: &PipelineArgs, info: &SourceInfo) -> Result<Box<dyn Detector>> {
+    if a.road_mask.is_some() && a.detections.is_some() {
+        bail!("--road-mask applies to the motion detector, not to --detections");
+    }
+    if let Some(path) = &a.detections {
+        return Ok(Box::new(FileDetector::open(path)?));
+    }
+    #[cfg(feature = "onnx")]
+    if let Some(path) = &a.onnx {
+        if a.road_mask.is_some() {
+            bail!("--road-mask applies to the motion detector, not to --onnx");
+        }
+        let config = vpcal_video::detect::OnnxConfig {
+            layout: a.onnx_layout,
+            ..vpcal_video::detect::OnnxConfig::default()
+        };
+        return Ok(Box::new(vpcal_video::detect::OnnxDetector::open(
+            path, config,
+        )?));
+    }
+    let mut d = MotionDetector::new(MotionConfig::default())?;
+    if let Some(mask) = &a.road_mask {
+        let m = vpcal_video::detect::motion::load_road_mask(mask)?;
+        if m.dimensions() != (info.width, info.height) {
+            bail!(
+                "--road-mask {}: {}x{} pixels, but the frames are {}x{}",
+                mask.display(),
+                m.width(),
+                m.height(),
+                info.width,
+                info.height
+            );
+        }
+        d = d.with_road_mask(m, mask.clone());
+    }
+    Ok(Box::new(d))
 }
 
 /// The principal point: `--pp` or the image centre.
@@ -587,7 +616,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             if args.json {
                 println!("{}", serde_json::to_string_pretty(&doc)?);
             }
-            eprintln!("vpcal: not enough evidence for a calibration: {e:#}");
+            eprintln!("vpcal: no calibration: {e:#}");
             Ok(std::process::ExitCode::from(EXIT_NOT_ENOUGH_EVIDENCE))
         }
     }

@@ -99,7 +99,7 @@ pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
     let (cal, agg) = match result {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("vpcal demo: not enough evidence for a calibration: {e:#}");
+            eprintln!("vpcal demo: no calibration: {e:#}");
             return Ok(std::process::ExitCode::from(
                 calibrate::EXIT_NOT_ENOUGH_EVIDENCE,
             ));
