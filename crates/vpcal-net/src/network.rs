@@ -51,12 +51,19 @@ pub trait VpNetwork: Module + Clone + core::fmt::Debug + 'static {
     fn check_batch(config: &Self::Config, batch: &Batch) -> Result<(), NetError>;
 
     /// The loss terms of a batch, `[terms]` (their sum is minimised); for the heatmap model one
-    /// MSE per stack.
+    /// MSE per stack. `fg_weight` weights each heatmap pixel's squared error by
+    /// `1 + fg_weight * target` (0 = the paper's plain MSE); the regression models ignore it.
     ///
     /// # Shapes
     /// - `images`: `[batch, 3, input, input]`
     /// - output: `[terms]`
-    fn loss_terms(&self, config: &Self::Config, images: Tensor<4>, batch: &Batch) -> Tensor<1>;
+    fn loss_terms(
+        &self,
+        config: &Self::Config,
+        images: Tensor<4>,
+        batch: &Batch,
+        fg_weight: f64,
+    ) -> Tensor<1>;
 
     /// Validation on a batch with a validation-mode network (`Module::valid`): returns the
     /// loss terms and adds the VP errors to `acc`.
@@ -102,11 +109,20 @@ pub fn to_vec<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, NetError> {
         .map_err(|e| NetError::Tensor(format!("{e:?}")))
 }
 
-/// MSE of every stack's heatmaps against the targets, `[stacks]`.
-fn heatmap_losses(outs: Vec<Tensor<4>>, targets: Tensor<4>) -> Tensor<1> {
+/// MSE of every stack's heatmaps against the targets, `[stacks]`; with `fg_weight > 0` each
+/// pixel's squared error is weighted by `1 + fg_weight * target`, so the few pixels of the
+/// Gaussian peaks are not drowned by the empty background.
+fn heatmap_losses(outs: Vec<Tensor<4>>, targets: Tensor<4>, fg_weight: f64) -> Tensor<1> {
+    let weights = (fg_weight > 0.0).then(|| targets.clone().mul_scalar(fg_weight).add_scalar(1.0));
     let terms: Vec<Tensor<1>> = outs
         .into_iter()
-        .map(|o| (o - targets.clone()).square().mean()) // [1]
+        .map(|o| {
+            let sq = (o - targets.clone()).square(); // [b, k, r, r]
+            match &weights {
+                Some(w) => (sq * w.clone()).mean(),
+                None => sq.mean(),
+            } // [1]
+        })
         .collect();
     Tensor::cat(terms, 0) // [stacks]
 }
@@ -171,10 +187,16 @@ impl VpNetwork for StackedHourglass {
         Ok(())
     }
 
-    fn loss_terms(&self, _config: &ModelConfig, images: Tensor<4>, batch: &Batch) -> Tensor<1> {
+    fn loss_terms(
+        &self,
+        _config: &ModelConfig,
+        images: Tensor<4>,
+        batch: &Batch,
+        fg_weight: f64,
+    ) -> Tensor<1> {
         let device = images.device();
         let targets = targets_tensor(batch, &device); // [b, k, r, r]
-        heatmap_losses(self.forward(images), targets)
+        heatmap_losses(self.forward(images), targets, fg_weight)
     }
 
     fn evaluate(
@@ -188,7 +210,7 @@ impl VpNetwork for StackedHourglass {
         let targets = targets_tensor(batch, &device);
         let outs = self.forward(images);
         let last = outs.last().cloned();
-        let terms = to_vec(heatmap_losses(outs, targets))?;
+        let terms = to_vec(heatmap_losses(outs, targets, 0.0))?;
         if let Some(last) = last {
             let heat = to_vec(last)?;
             let codec = config.codec();

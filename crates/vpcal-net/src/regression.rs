@@ -436,7 +436,13 @@ impl VpNetwork for Regressor {
         Ok(())
     }
 
-    fn loss_terms(&self, config: &RegressionConfig, images: Tensor<4>, batch: &Batch) -> Tensor<1> {
+    fn loss_terms(
+        &self,
+        config: &RegressionConfig,
+        images: Tensor<4>,
+        batch: &Batch,
+        _fg_weight: f64,
+    ) -> Tensor<1> {
         let device = images.device();
         let truth = truth_tensor(batch, &device);
         normalised_loss(self.forward(images), truth, config.loss)

@@ -155,6 +155,10 @@ pub struct TrainConfig<C> {
     pub data: String,
     /// How many epoch checkpoints to keep (the latest ones); at least 1.
     pub keep_checkpoints: usize,
+    /// Heatmap loss: weight of a pixel's squared error is `1 + fg_weight * target` (0, the
+    /// default, is the paper's plain MSE). Validation loss is always the plain MSE.
+    #[serde(default)]
+    pub fg_weight: f64,
 }
 
 impl<C> TrainConfig<C> {
@@ -171,6 +175,7 @@ impl<C> TrainConfig<C> {
             max_val_batches: None,
             data: String::new(),
             keep_checkpoints: 2,
+            fg_weight: 0.0,
         }
     }
 }
@@ -434,7 +439,9 @@ impl<N: VpNetwork> Trainer<N> {
     pub fn step(&mut self, batch: &vpcal_data::Batch, lr: f64) -> Result<Vec<f32>, NetError> {
         N::check_batch(&self.config.model, batch)?;
         let images = images_tensor(batch, &self.device)?; // [b, 3, s, s]
-        let terms = self.model.loss_terms(&self.config.model, images, batch); // [terms]
+        let terms = self
+            .model
+            .loss_terms(&self.config.model, images, batch, self.config.fg_weight); // [terms]
         let total = terms.clone().sum(); // [1]
         let grads = total.backward();
         let values = to_vec(terms)?;

@@ -1,6 +1,5 @@
 //! The crop directory format (see `FORMAT.md`): writer and reader.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -37,12 +36,7 @@ struct ConfigFile {
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SynthError> {
-    let tmp = path.with_extension(format!(
-        "{}.tmp",
-        path.extension().and_then(|e| e.to_str()).unwrap_or("")
-    ));
-    std::fs::write(&tmp, bytes).map_err(|e| SynthError::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| SynthError::io(path, e))
+    vpcal_formats::fs::replace_bytes(path, bytes).map_err(|e| SynthError::io(path, e))
 }
 
 /// Generate `count` crops (global indices 0..count) into `dir`, in parallel. `progress` is
@@ -95,15 +89,7 @@ pub fn write_crops(
         progress(end);
         start = end;
     }
-    let path = dir.join("samples.jsonl");
-    let tmp = dir.join("samples.jsonl.tmp");
-    {
-        let mut f = std::fs::File::create(&tmp).map_err(|e| SynthError::io(&tmp, e))?;
-        f.write_all(lines.as_bytes())
-            .map_err(|e| SynthError::io(&tmp, e))?;
-        f.sync_all().map_err(|e| SynthError::io(&tmp, e))?;
-    }
-    std::fs::rename(&tmp, &path).map_err(|e| SynthError::io(&path, e))
+    write_atomic(&dir.join("samples.jsonl"), lines.as_bytes())
 }
 
 /// The JSON record of a crop.

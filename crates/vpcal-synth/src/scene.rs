@@ -1066,9 +1066,7 @@ pub struct SceneSummary {
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SynthError> {
-    let tmp = PathBuf::from(format!("{}.tmp", path.display()));
-    std::fs::write(&tmp, bytes).map_err(|e| SynthError::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| SynthError::io(path, e))
+    vpcal_formats::fs::replace_bytes(path, bytes).map_err(|e| SynthError::io(path, e))
 }
 
 fn json_bytes<T: serde::Serialize>(v: &T, path: &Path) -> Result<Vec<u8>, SynthError> {
@@ -1079,12 +1077,11 @@ fn json_bytes<T: serde::Serialize>(v: &T, path: &Path) -> Result<Vec<u8>, SynthE
 }
 
 fn save_png(img: &image::RgbImage, path: &Path) -> Result<(), SynthError> {
-    let tmp = PathBuf::from(format!("{}.tmp.png", path.display()));
-    img.save(&tmp).map_err(|e| SynthError::Image {
-        path: tmp.clone(),
-        source: e,
-    })?;
-    std::fs::rename(&tmp, path).map_err(|e| SynthError::io(path, e))
+    vpcal_formats::fs::replace_with(path, |tmp| {
+        img.save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+    .map_err(|e| SynthError::io(path, e))
 }
 
 /// An ffmpeg subprocess encoding raw RGB frames to H.264.

@@ -2,41 +2,10 @@
 //! End-to-end tests of `vpcal calibrate`, `demo`, `scale` and `measure`. Tests on the real
 //! clips in `VPCAL_DATA` (default `../shared/data`) skip with a message when it is absent.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn vpcal(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vpcal"))
-        .args(args)
-        .output()
-        .expect("run vpcal")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn traffic_video() -> Option<PathBuf> {
-    let dir = std::env::var_os("VPCAL_DATA").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
-        PathBuf::from,
-    );
-    let dir = dir.join("traffic_video");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipping: {} not found (set VPCAL_DATA)", dir.display());
-        None
-    }
-}
-
-fn read_json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-}
+use common::{read_json, real_data, text, vpcal};
+use std::path::Path;
 
 /// Files in `dir` (to check that no temporary file is left behind).
 fn names(dir: &Path) -> Vec<String> {
@@ -50,7 +19,9 @@ fn names(dir: &Path) -> Vec<String> {
 
 #[test]
 fn calibrate_a_real_clip_writes_consistent_outputs() {
-    let Some(dir) = traffic_video() else { return };
+    let Some(dir) = real_data("traffic_video") else {
+        return;
+    };
     let clip = dir.join("bgslibrary_video02_highway_cam_320x240.avi");
     let out = tempfile::tempdir().unwrap();
     let o = |n: &str| out.path().join(n).to_str().unwrap().to_string();

@@ -3,38 +3,14 @@
 //! `VPCAL_DATA` (default `../shared/data` beside the repository) skip with a message when it
 //! is absent.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn vpcal(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vpcal"))
-        .args(args)
-        .output()
-        .expect("run vpcal")
-}
+use common::{real_data, stderr, stdout, vpcal};
+use std::path::PathBuf;
 
+/// The real data root, when its `bcs` folder is there.
 fn data_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("VPCAL_DATA").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
-        PathBuf::from,
-    );
-    if dir.join("bcs").is_dir() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "skipping: real data not found at {} (set VPCAL_DATA)",
-            dir.display()
-        );
-        None
-    }
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
+    real_data("bcs").and_then(|bcs| bcs.parent().map(PathBuf::from))
 }
 
 /// Expected per-video ratio errors of the published DubskaCalib results on sessions 0-3,

@@ -1,22 +1,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! End-to-end tests of `vpcal train` and `vpcal predict` on the toy data (no dataset needed).
 
-use std::process::{Command, Output};
+mod common;
 
-fn vpcal(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vpcal"))
-        .args(args)
-        .output()
-        .expect("run vpcal")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use common::{text, vpcal};
 
 #[test]
 fn train_resume_and_predict_on_toy_data() {

@@ -24,7 +24,6 @@
 //! Frames without an entry have no detections.
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use vpcal_geom::BoxPx;
@@ -342,27 +341,8 @@ pub fn write_detections(path: &Path, rows: &[(u64, Detection)]) -> Result<()> {
     write_atomic(path, &out)
 }
 
-/// Writes `bytes` to a temporary file next to `path` and renames it over `path`.
+/// Writes `bytes` atomically ([`vpcal_formats::fs::replace_bytes`]).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().to_string())
-        .unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        // Why ignored: the temporary file may not exist; the original error is what matters.
-        let _ = std::fs::remove_file(&tmp);
-        return Err(VideoError::io("cannot write", path, e));
-    }
-    Ok(())
+    vpcal_formats::fs::replace_bytes(path, bytes)
+        .map_err(|e| VideoError::io("cannot write", path, e))
 }

@@ -147,28 +147,6 @@ pub fn open_source(spec: &str, split: Split) -> anyhow::Result<Arc<dyn SampleSou
     }
 }
 
-/// Write a PNG through a temporary file in the same directory, then rename.
-fn write_png(path: &Path, img: &image::RgbImage) -> anyhow::Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .with_context(|| format!("{}: not a file name", path.display()))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    img.save_with_format(&tmp, image::ImageFormat::Png)
-        .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("renaming {} to {}", tmp.display(), path.display())
-    })
-}
-
 /// Run a `vpcal data` subcommand.
 pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
     match cmd {
@@ -217,7 +195,7 @@ fn preview(a: PreviewArgs) -> anyhow::Result<()> {
         }
     }
     let sheet = vpcal_data::preview::contact_sheet(&items, 0, a.scale);
-    write_png(&a.output, &sheet)?;
+    vpcal_video::draw::save_png(&sheet, &a.output)?;
     println!(
         "{}: {} crops ({:?} split, augmentation {}), {}x{} px{}",
         a.output.display(),

@@ -8,7 +8,7 @@ use clap::{Args as ClapArgs, ValueEnum};
 use image::{Rgb, RgbImage};
 use vpcal_geom::heatmap::DecodeMode;
 use vpcal_geom::{BoxPx, Point2};
-use vpcal_net::report::{encode_png, heatmap_grid};
+use vpcal_net::report::heatmap_grid;
 use vpcal_net::VpNet;
 
 /// How the spreads `D^s` decode the near-maximum pixels.
@@ -142,11 +142,6 @@ fn frame_overlay(frame: &RgbImage, bbox: &BoxPx, vp1: Point2, vp2: Point2) -> Rg
     img
 }
 
-fn write_png(path: &Path, img: &RgbImage) -> Result<()> {
-    let bytes = encode_png(img)?;
-    vpcal_net::write_atomic(path, &bytes).with_context(|| format!("writing {}", path.display()))
-}
-
 /// Run `vpcal predict`.
 pub fn run(a: Args) -> Result<()> {
     if a.bbox.is_some() && a.crops.len() != 1 {
@@ -186,7 +181,7 @@ pub fn run(a: Args) -> Result<()> {
             zoom,
             Some(crop),
         );
-        write_png(&grid_path, &grid)?;
+        vpcal_video::draw::save_png(&grid, &grid_path)?;
         let vp = &p.vp;
         let frame_vps = a
             .bbox
@@ -196,7 +191,7 @@ pub fn run(a: Args) -> Result<()> {
                 .with_context(|| format!("reading the frame {}", frame_path.display()))?
                 .to_rgb8();
             let overlay_path = output_path(path, a.out.as_deref(), "frame");
-            write_png(&overlay_path, &frame_overlay(&frame, b, f1, f2))?;
+            vpcal_video::draw::save_png(&frame_overlay(&frame, b, f1, f2), &overlay_path)?;
             if !a.json {
                 println!("  overlay: {}", overlay_path.display());
             }

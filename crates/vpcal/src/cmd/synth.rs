@@ -251,7 +251,7 @@ fn run_crops(a: &CropsArgs) -> Result<()> {
         let samples = (0..n).map(|i| src.get(i)).collect::<Result<Vec<_>, _>>()?;
         let sheet = vpcal_synth::sheet::contact_sheet(&samples, 6, 220, true);
         let p = a.out.join("sheet.png");
-        save(&sheet, &p)?;
+        vpcal_video::draw::save_png(&sheet, &p)?;
         println!("contact sheet: {}", p.display());
     }
     Ok(())
@@ -259,13 +259,6 @@ fn run_crops(a: &CropsArgs) -> Result<()> {
 
 fn rayon_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
-}
-
-fn save(img: &image::RgbImage, path: &Path) -> Result<()> {
-    let tmp = PathBuf::from(format!("{}.tmp.png", path.display()));
-    img.save(&tmp)
-        .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))
 }
 
 fn write_one(spec: &SceneSpec, out: &Path, output: &OutputArgs) -> Result<()> {
@@ -367,7 +360,7 @@ fn run_sheet(a: &SheetArgs) -> Result<()> {
         bail!("no crops to show");
     }
     let sheet = vpcal_synth::sheet::contact_sheet(&samples, a.cols, a.cell, !a.plain);
-    save(&sheet, &a.out)?;
+    vpcal_video::draw::save_png(&sheet, &a.out)?;
     println!(
         "contact sheet of {} crops: {}",
         samples.len(),

@@ -85,6 +85,11 @@ pub struct Args {
     /// Data pipeline threads (default: one per core).
     #[arg(long)]
     pub workers: Option<usize>,
+    /// Heatmap loss weighting: each pixel's squared error counts `1 + W * target`, so the
+    /// Gaussian peaks are not drowned by the empty background (0 = the paper's plain MSE).
+    /// Validation loss stays the plain MSE.
+    #[arg(long, value_name = "W", default_value_t = 0.0)]
+    pub fg_weight: f64,
     /// Epoch checkpoints to keep.
     #[arg(long, default_value_t = 2)]
     pub keep: usize,
@@ -275,6 +280,10 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
         tc.max_val_batches = a.max_val_batches;
         tc.data = format!("{data} augment={}", a.augment);
         tc.keep_checkpoints = a.keep.max(1);
+        if !(a.fg_weight.is_finite() && a.fg_weight >= 0.0) {
+            bail!("--fg-weight {}: expected a finite weight >= 0", a.fg_weight);
+        }
+        tc.fg_weight = a.fg_weight;
         let t = Trainer::<N>::new(tc, &a.out, &device)
             .with_context(|| format!("starting a run in {}", a.out.display()))?;
         (t, source)

@@ -1,0 +1,46 @@
+//! Helpers shared by the `vpcal` binary's integration tests.
+#![allow(dead_code, clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// Run the `vpcal` binary built for these tests.
+pub fn vpcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vpcal"))
+        .args(args)
+        .output()
+        .expect("run vpcal")
+}
+
+/// stdout then stderr of a run, for assertion messages.
+pub fn text(o: &Output) -> String {
+    format!("{}{}", stdout(o), stderr(o))
+}
+
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// `sub` inside the real data (`VPCAL_DATA`, default `../shared/data` beside the repository),
+/// or `None` with a "skipping" message when it is absent.
+pub fn real_data(sub: &str) -> Option<PathBuf> {
+    let root = std::env::var_os("VPCAL_DATA").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
+        PathBuf::from,
+    );
+    let dir = root.join(sub);
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        eprintln!("skipping: {} not found (set VPCAL_DATA)", dir.display());
+        None
+    }
+}
+
+pub fn read_json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
