@@ -13,9 +13,13 @@ fn train_resume_and_predict_on_toy_data() {
     let common = [
         "train", "--data", "toy:16", "--preset", "tiny", "--batch", "8", "--out", run_s, "--quiet",
     ];
-    let o = vpcal(&[&common[..], &["--epochs", "1"]].concat());
+    let o = vpcal(&[&common[..], &["--epochs", "1", "--fg-weight", "4"]].concat());
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("epoch 1/1"), "{}", text(&o));
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("train_config.json")).unwrap())
+            .unwrap();
+    assert_eq!(saved["fg_weight"], 4.0, "{saved}");
     for f in [
         "metrics.csv",
         "metrics.jsonl",
@@ -29,6 +33,23 @@ fn train_resume_and_predict_on_toy_data() {
     let o = vpcal(&[&common[..], &["--epochs", "1"]].concat());
     assert!(
         !o.status.success() && text(&o).contains("--resume"),
+        "{}",
+        text(&o)
+    );
+    // A resumed run keeps its loss: another --fg-weight is refused, naming both.
+    let o = vpcal(&[
+        "train",
+        "--resume",
+        "--out",
+        run_s,
+        "--epochs",
+        "2",
+        "--fg-weight",
+        "9",
+        "--quiet",
+    ]);
+    assert!(
+        !o.status.success() && text(&o).contains("started with --fg-weight 4"),
         "{}",
         text(&o)
     );

@@ -88,8 +88,9 @@ pub struct Args {
     /// Heatmap loss weighting: each pixel's squared error counts `1 + W * target`, so the
     /// Gaussian peaks are not drowned by the empty background (0 = the paper's plain MSE).
     /// Validation loss stays the plain MSE.
-    #[arg(long, value_name = "W", default_value_t = 0.0)]
-    pub fg_weight: f64,
+    /// A resumed run keeps the weight it was started with.
+    #[arg(long, value_name = "W")]
+    pub fg_weight: Option<f64>,
     /// Epoch checkpoints to keep.
     #[arg(long, default_value_t = 2)]
     pub keep: usize,
@@ -237,6 +238,14 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
     let (trainer, source) = if a.resume {
         let mut t = Trainer::<N>::resume(&a.out, &device)
             .with_context(|| format!("resuming the run in {}", a.out.display()))?;
+        if let Some(w) = a.fg_weight.filter(|w| *w != t.config().fg_weight) {
+            bail!(
+                "--fg-weight {w}: the run in {} was started with --fg-weight {} and a resumed \
+                 run keeps its loss (start a new run to change it)",
+                a.out.display(),
+                t.config().fg_weight
+            );
+        }
         if let Some(e) = a.epochs {
             let base = t.config().schedule.lr_at(0);
             t.set_schedule(schedule(a, e, base))?;
@@ -280,10 +289,11 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
         tc.max_val_batches = a.max_val_batches;
         tc.data = format!("{data} augment={}", a.augment);
         tc.keep_checkpoints = a.keep.max(1);
-        if !(a.fg_weight.is_finite() && a.fg_weight >= 0.0) {
-            bail!("--fg-weight {}: expected a finite weight >= 0", a.fg_weight);
+        let fg_weight = a.fg_weight.unwrap_or(0.0);
+        if !(fg_weight.is_finite() && fg_weight >= 0.0) {
+            bail!("--fg-weight {fg_weight}: expected a finite weight >= 0");
         }
-        tc.fg_weight = a.fg_weight;
+        tc.fg_weight = fg_weight;
         let t = Trainer::<N>::new(tc, &a.out, &device)
             .with_context(|| format!("starting a run in {}", a.out.display()))?;
         (t, source)
