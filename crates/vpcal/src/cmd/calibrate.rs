@@ -572,15 +572,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
                 write_json_doc(path, &doc)?;
             }
             if let Some(path) = &args.bcs_json {
-                write_system(
-                    path,
-                    &SystemFile::new(SystemCalibration {
-                        vp1: cal.vp1,
-                        vp2: cal.vp2,
-                        pp: cal.pp,
-                        scale: 1.0,
-                    }),
-                )?;
+                write_bcs_system(path, &cal)?;
             }
             if let Some(path) = &args.overlay {
                 let Some(picture) = &out.picture else {
@@ -620,6 +612,18 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             Ok(std::process::ExitCode::from(EXIT_NOT_ENOUGH_EVIDENCE))
         }
     }
+}
+
+/// Write `cal` as a BrnoCompSpeed system file (scale 1: no metric scale yet).
+pub fn write_bcs_system(path: &Path, cal: &Calibration) -> Result<()> {
+    let system = SystemFile::new(SystemCalibration {
+        vp1: cal.vp1,
+        vp2: cal.vp2,
+        pp: cal.pp,
+        scale: 1.0,
+    });
+    write_system(path, &system)?;
+    Ok(())
 }
 
 /// Write a JSON document atomically (temp file, then rename), pretty-printed.

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use serde_json::json;
-use vpcal_formats::bcs::{read_gt, read_system, write_system, SystemCalibration, SystemFile};
+use vpcal_formats::bcs::{read_gt, read_system};
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::{ratio_errors, summarize};
 use vpcal_synth::scene::{render_scene, SceneSpec, WriteOptions};
@@ -139,15 +139,7 @@ pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
         );
     }
     write_json_doc(&a.out.join("calib.json"), &doc)?;
-    write_system(
-        &results.join("system_vpcal.json"),
-        &SystemFile::new(SystemCalibration {
-            vp1: cal.vp1,
-            vp2: cal.vp2,
-            pp: cal.pp,
-            scale: 1.0,
-        }),
-    )?;
+    super::calibrate::write_bcs_system(&results.join("system_vpcal.json"), &cal)?;
     let overlay_path = a.out.join("overlay.png");
     if let Some(picture) = &out.picture {
         vpcal_video::draw::save_png(&overlay::draw(picture, &cal, &out.records), &overlay_path)?;
