@@ -49,7 +49,7 @@ pub use model::StackedHourglass;
 pub use network::VpNetwork;
 pub use pipeline_source::PipelineSource;
 pub use source::{BatchSource, ToySource};
-pub use train::{LrSchedule, TrainConfig, Trainer};
+pub use train::{DataSegment, LrSchedule, TrainConfig, Trainer};
 
 use std::path::{Path, PathBuf};
 

@@ -151,8 +151,13 @@ pub struct TrainConfig<C> {
     pub max_train_batches: Option<usize>,
     /// Validate on at most this many batches; `None` = all.
     pub max_val_batches: Option<usize>,
-    /// Description of the data source (informational).
+    /// Description of the data source (informational); the current one when a resumed run
+    /// switched sources (see `data_history`).
     pub data: String,
+    /// The sources of a run that changed its data on resume, oldest first; empty for a run
+    /// trained on one source throughout.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub data_history: Vec<DataSegment>,
     /// How many epoch checkpoints to keep (the latest ones); at least 1.
     pub keep_checkpoints: usize,
     /// Heatmap loss: weight of a pixel's squared error is `1 + fg_weight * target` (0, the
@@ -174,10 +179,20 @@ impl<C> TrainConfig<C> {
             max_train_batches: None,
             max_val_batches: None,
             data: String::new(),
+            data_history: Vec::new(),
             keep_checkpoints: 2,
             fg_weight: 0.0,
         }
     }
+}
+
+/// One stretch of a run trained on one data source.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DataSegment {
+    /// First epoch (1-based) trained on `data`.
+    pub first_epoch: usize,
+    /// Description of the source, as in [`TrainConfig::data`].
+    pub data: String,
 }
 
 /// Metrics of one finished epoch.
@@ -407,6 +422,37 @@ impl<N: VpNetwork> Trainer<N> {
             )));
         }
         self.config.schedule = schedule;
+        write_json(&self.out.join(TRAIN_CONFIG), &self.config)
+    }
+
+    /// Record that the epochs from the next one on train on `data` (a resumed run given another
+    /// source). The run's `train_config.json` keeps every source with its first epoch.
+    pub fn set_data(&mut self, data: &str) -> Result<(), NetError> {
+        if data == self.config.data {
+            return Ok(());
+        }
+        let first_epoch = self.state.epochs_done + 1;
+        let history = &mut self.config.data_history;
+        if history.is_empty() {
+            history.push(DataSegment {
+                first_epoch: 1,
+                data: self.config.data.clone(),
+            });
+        }
+        // A source that never trained an epoch is replaced, not kept.
+        if history.last().is_some_and(|s| s.first_epoch == first_epoch) {
+            history.pop();
+        }
+        if history.last().is_none_or(|s| s.data != data) {
+            history.push(DataSegment {
+                first_epoch,
+                data: data.to_string(),
+            });
+        }
+        if history.len() == 1 {
+            history.clear();
+        }
+        self.config.data = data.to_string();
         write_json(&self.out.join(TRAIN_CONFIG), &self.config)
     }
 

@@ -239,3 +239,41 @@ fn regression_baseline_trains_checkpoints_and_resumes() {
         .to_string();
     assert!(err.contains("train_config.json"), "{err}");
 }
+
+#[test]
+fn a_changed_data_source_is_recorded_with_its_first_epoch() {
+    let config = small_config();
+    let source = toy(&config);
+    let device = Device::flex();
+    let dir = tempfile::tempdir().unwrap();
+    let mut t = Trainer::<StackedHourglass>::new(train_config(&config, 2), dir.path(), &device)
+        .unwrap()
+        .with_progress(false);
+    // Before any epoch: a switch replaces the source, with no history.
+    t.set_data("toy-b").unwrap();
+    assert_eq!(t.config().data, "toy-b");
+    assert!(t.config().data_history.is_empty());
+    t.set_data("toy").unwrap();
+    assert!(t.config().data_history.is_empty());
+    t.set_schedule(LrSchedule::two_phase(1, 2e-3)).unwrap();
+    t.run(&source).unwrap();
+
+    // After epoch 1: both sources with their first epochs, saved in train_config.json.
+    let mut back = Trainer::<StackedHourglass>::resume(dir.path(), &device).unwrap();
+    back.set_data("toy-b").unwrap();
+    back.set_data("toy-c").unwrap(); // replaces toy-b, which trained no epoch
+    let saved: TrainConfig<ModelConfig> = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("train_config.json")).unwrap(),
+    )
+    .unwrap();
+    let history: Vec<(usize, &str)> = saved
+        .data_history
+        .iter()
+        .map(|s| (s.first_epoch, s.data.as_str()))
+        .collect();
+    assert_eq!(history, [(1, "toy"), (2, "toy-c")]);
+    assert_eq!(saved.data, "toy-c");
+    // Back to the first source before training: one source again.
+    back.set_data("toy").unwrap();
+    assert!(back.config().data_history.is_empty());
+}

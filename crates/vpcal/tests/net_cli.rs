@@ -53,14 +53,27 @@ fn train_resume_and_predict_on_toy_data() {
         "{}",
         text(&o)
     );
+    // Resuming on another source continues at epoch 2 and records both sources.
     let o = vpcal(&[
-        "train", "--resume", "--out", run_s, "--epochs", "2", "--quiet",
+        "train", "--resume", "--out", run_s, "--epochs", "2", "--data", "toy:24", "--quiet",
     ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(
         text(&o).contains("epoch 2/2") && !text(&o).contains("epoch 1/2"),
         "{}",
         text(&o)
+    );
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("train_config.json")).unwrap())
+            .unwrap();
+    assert_eq!(saved["data"], "toy:24 augment=paper", "{saved}");
+    assert_eq!(
+        saved["data_history"],
+        serde_json::json!([
+            {"first_epoch": 1, "data": "toy:16 augment=paper"},
+            {"first_epoch": 2, "data": "toy:24 augment=paper"},
+        ]),
+        "{saved}"
     );
 
     // Predict on a crop cut from a frame, with the VPs mapped back to the frame.

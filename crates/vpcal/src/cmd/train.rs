@@ -251,7 +251,8 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
             t.set_schedule(schedule(a, e, base))?;
         }
         // The data of a resumed run is the one it was started with (same seed, so the same
-        // batches per epoch), unless --data overrides it.
+        // batches per epoch), unless --data overrides it; train_config.json then records
+        // each source with the first epoch it trained.
         let saved = t.config().data.clone();
         let (spec, augment) = match (&a.data, saved.split_once(" augment=")) {
             (Some(d), _) => (d.clone(), a.augment.clone()),
@@ -267,6 +268,7 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
             t.config().seed,
             a.workers,
         )?;
+        t.set_data(&format!("{spec} augment={augment}"))?;
         (t, source)
     } else {
         let Some(data) = &a.data else {
