@@ -224,6 +224,27 @@ fn pool(system: String, videos: Vec<VideoResult>) -> SystemResult {
 }
 
 /// System names found as `system_<name>.json` in the given directories.
+/// The systems to evaluate: the ones asked for, or every `system_<name>.json` found in `dirs`
+/// (one per video or session, `what` in the error when there is none).
+fn system_names(
+    systems: &[String],
+    dirs: impl Iterator<Item = PathBuf>,
+    results: &Path,
+    what: &str,
+) -> Result<Vec<String>> {
+    if !systems.is_empty() {
+        return Ok(systems.to_vec());
+    }
+    let names: Vec<String> = find_systems(dirs).into_iter().collect();
+    if names.is_empty() {
+        bail!(
+            "no system_<name>.json under {} for these {what}",
+            results.display()
+        );
+    }
+    Ok(names)
+}
+
 fn find_systems(dirs: impl Iterator<Item = PathBuf>) -> BTreeSet<String> {
     let mut names = BTreeSet::new();
     for dir in dirs {
@@ -276,19 +297,12 @@ pub fn evaluate_bcs(
             split.map_or(String::new(), |s| format!(" in split {s}"))
         );
     }
-    let names: Vec<String> = if systems.is_empty() {
-        find_systems(videos.iter().map(|(v, _)| results.join(v)))
-            .into_iter()
-            .collect()
-    } else {
-        systems.to_vec()
-    };
-    if names.is_empty() {
-        bail!(
-            "no system_<name>.json under {} for these videos",
-            results.display()
-        );
-    }
+    let names = system_names(
+        systems,
+        videos.iter().map(|(v, _)| results.join(v)),
+        results,
+        "videos",
+    )?;
     let mut gts = Vec::with_capacity(videos.len());
     for (name, dir) in &videos {
         let gt = read_gt(dir)?;
@@ -341,19 +355,12 @@ pub fn evaluate_bcp(
             ground_truth.display()
         );
     }
-    let names: Vec<String> = if systems.is_empty() {
-        find_systems(sessions.iter().map(|(s, _)| results.join(s)))
-            .into_iter()
-            .collect()
-    } else {
-        systems.to_vec()
-    };
-    if names.is_empty() {
-        bail!(
-            "no system_<name>.json under {} for these sessions",
-            results.display()
-        );
-    }
+    let names = system_names(
+        systems,
+        sessions.iter().map(|(s, _)| results.join(s)),
+        results,
+        "sessions",
+    )?;
     let mut gts = Vec::new();
     for (name, path) in &sessions {
         gts.push((name.clone(), read_gt_pairs(path)?));
