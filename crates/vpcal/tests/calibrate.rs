@@ -113,6 +113,22 @@ fn calibrate_refuses_bad_input_without_leaving_files() {
     assert_eq!(r.status.code(), Some(1), "{}", text(&r));
     assert!(text(&r).contains("junk.safetensors"), "{}", text(&r));
     assert!(!calib.exists());
+    // An output in a folder that does not exist is refused before the run, naming both.
+    let r = vpcal(&[
+        "calibrate",
+        img.to_str().unwrap(),
+        "-o",
+        calib.to_str().unwrap(),
+        "--bcs-json",
+        out.path().join("no_dir/system.json").to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(
+        text(&r).contains("--bcs-json") && text(&r).contains("no_dir"),
+        "{}",
+        text(&r)
+    );
+    assert!(!calib.exists());
     // --every 0 is refused by the frame selection.
     let r = vpcal(&["calibrate", img.to_str().unwrap(), "--every", "0"]);
     assert_eq!(r.status.code(), Some(1), "{}", text(&r));

@@ -557,6 +557,17 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
 }
 
 pub fn run(args: Args) -> Result<std::process::ExitCode> {
+    // Fail before a long run, not after it, when an output cannot be written.
+    for (flag, path) in [
+        ("--output", &args.output),
+        ("--bcs-json", &args.bcs_json),
+        ("--vehicles", &args.vehicles),
+        ("--overlay", &args.overlay),
+    ] {
+        if let Some(path) = path {
+            check_destination(flag, path)?;
+        }
+    }
     let out = run_pipeline(&args.input, &args.pipeline)?;
     let result = calibrate(&out, &args.pipeline);
     print_summary(&out, &result);
@@ -611,6 +622,24 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
             eprintln!("vpcal: no calibration: {e:#}");
             Ok(std::process::ExitCode::from(EXIT_NOT_ENOUGH_EVIDENCE))
         }
+    }
+}
+
+/// An output file can be created at `path`: its folder exists and `path` is not a folder.
+pub fn check_destination(flag: &str, path: &Path) -> Result<()> {
+    if path.is_dir() {
+        bail!(
+            "{flag} {}: is a folder, expected a file name",
+            path.display()
+        );
+    }
+    match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => bail!(
+            "{flag} {}: the folder {} does not exist",
+            path.display(),
+            dir.display()
+        ),
+        _ => Ok(()),
     }
 }
 
