@@ -232,6 +232,36 @@ fn no_boxes_or_too_few_vehicles_is_not_enough_evidence() {
 }
 
 #[test]
+fn a_horizon_below_the_vehicles_is_refused() {
+    // Vehicles of a real scene whose VPs all agree on a camera with the horizon at y = 1500,
+    // below every box: geometrically a camera, physically impossible (cars stand on the road).
+    let scene = Scene::new(1400.0, 0.35, 0.0, 0.35, 8.0);
+    let mut rng = Lcg(5);
+    let (vp1, vp2) = (Point2::new(900.0, 1500.0), Point2::new(-6000.0, 1500.0));
+    let vehicles: Vec<VehicleVps> = cloud(&scene, 600, 0.0, 9)
+        .into_iter()
+        .map(|mut v| {
+            let c = v.box_px.unwrap().center();
+            v.vp1 = fake_vp(c, vp1, 1.0 * rng.normal(), 0.8 + 0.4 * rng.next());
+            v.vp2 = fake_vp(c, vp2, 0.5 * rng.normal(), 0.8 + 0.4 * rng.next());
+            v
+        })
+        .collect();
+    let opts = RobustOptions {
+        image_size: Some([1920.0, 1080.0]),
+        bootstrap: 0,
+        ..RobustOptions::default()
+    };
+    let e = aggregate(&vehicles, scene.pp, &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("not enough evidence") && e.contains("horizon runs through the traffic"),
+        "{e}"
+    );
+}
+
+#[test]
 fn bootstrap_confidence_brackets_the_estimate_and_is_deterministic() {
     let scene = Scene::new(1500.0, 0.3, 0.0, 0.4, 9.0);
     let vehicles = cloud(&scene, 800, 0.3, 5);
