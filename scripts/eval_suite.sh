@@ -19,6 +19,9 @@ for scene in "$SUITE"/dataset/*/; do
     name=$(basename "$scene")
     res="$SUITE/results/$name"
     echo "== $name"
+    mkdir -p "$res"
+    # A scene that is not calibrated this time must not be scored with an older run's file.
+    rm -f "$res/system_vpcal_trueboxes.json" "$res/system_vpcal_motion.json"
     "$VPCAL" calibrate "$scene/video.mp4" --detections "$scene/detections.csv" --quiet \
         --bcs-json "$res/system_vpcal_trueboxes.json" "$@" 2>&1 | grep -E "focal length|NOT CALIBRATED" || true
     "$VPCAL" calibrate "$scene/video.mp4" --quiet \
