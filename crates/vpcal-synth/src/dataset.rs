@@ -6,6 +6,7 @@ use rayon::prelude::*;
 use vpcal_data::{DataError, Sample, SampleId, Split};
 
 use crate::crops::{CropConfig, CropGenerator, CropMeta, CropSample};
+use crate::error::write_atomic;
 use crate::SynthError;
 
 /// The text of `FORMAT.md`, also written into every crop directory.
@@ -33,10 +34,6 @@ struct ConfigFile {
     seed: u64,
     count: u64,
     config: CropConfig,
-}
-
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SynthError> {
-    vpcal_formats::fs::replace_bytes(path, bytes).map_err(|e| SynthError::io(path, e))
 }
 
 /// Generate `count` crops (global indices 0..count) into `dir`, in parallel. `progress` is

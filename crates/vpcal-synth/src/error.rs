@@ -1,6 +1,6 @@
 //! The crate's error type.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Errors from rendering and from reading or writing synthetic data sets.
 #[derive(Debug, thiserror::Error)]
@@ -51,4 +51,10 @@ impl SynthError {
             source,
         }
     }
+}
+
+/// Write `bytes` to `path` atomically ([`vpcal_formats::fs::replace_bytes`]), naming `path` on
+/// failure.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SynthError> {
+    vpcal_formats::fs::replace_bytes(path, bytes).map_err(|e| SynthError::io(path, e))
 }

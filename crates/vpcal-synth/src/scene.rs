@@ -29,6 +29,7 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::crops::{hull, project_box};
+use crate::error::write_atomic;
 use crate::math::{rng_for, RngExt, V3};
 use crate::mesh::{Mesh, Pose};
 use crate::raster::{Backdrop, Target, NEAR_M};
@@ -1063,10 +1064,6 @@ pub struct SceneSummary {
     pub total_s: f64,
     pub detections: usize,
     pub focal_px: f64,
-}
-
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SynthError> {
-    vpcal_formats::fs::replace_bytes(path, bytes).map_err(|e| SynthError::io(path, e))
 }
 
 fn json_bytes<T: serde::Serialize>(v: &T, path: &Path) -> Result<Vec<u8>, SynthError> {

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{text, vpcal};
+use common::{read_json, text, vpcal};
 
 #[test]
 fn train_resume_and_predict_on_toy_data() {
@@ -16,9 +16,7 @@ fn train_resume_and_predict_on_toy_data() {
     let o = vpcal(&[&common[..], &["--epochs", "1", "--fg-weight", "4"]].concat());
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("epoch 1/1"), "{}", text(&o));
-    let saved: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(run.join("train_config.json")).unwrap())
-            .unwrap();
+    let saved = read_json(&run.join("train_config.json"));
     assert_eq!(saved["fg_weight"], 4.0, "{saved}");
     for f in [
         "metrics.csv",
@@ -63,9 +61,7 @@ fn train_resume_and_predict_on_toy_data() {
         "{}",
         text(&o)
     );
-    let saved: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(run.join("train_config.json")).unwrap())
-            .unwrap();
+    let saved = read_json(&run.join("train_config.json"));
     assert_eq!(saved["data"], "toy:24 augment=paper", "{saved}");
     assert_eq!(
         saved["data_history"],

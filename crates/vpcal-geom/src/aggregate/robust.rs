@@ -49,7 +49,7 @@
 
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
-use crate::point::{BoxPx, Point2};
+use crate::point::{BoxPx, Line, Point2};
 
 /// Settings of the robust aggregation; `Default` is what vpcal uses.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -840,17 +840,10 @@ fn fit_camera(
     (vp1, [p[2], p[3], 0.0], true)
 }
 
-/// Total weight of the points on the other side of the horizon (the line through `vp1` and
-/// `vp2`) than the image's bottom, seen from the principal point's column.
-fn weight_above_horizon(
-    centres: &[Point2],
-    weights: &[f64],
-    vp1: Point2,
-    vp2: Point2,
-    pp: Point2,
-) -> f64 {
-    let d = vp2 - vp1;
-    let side = |p: Point2| (d.x * (p.y - vp1.y) - d.y * (p.x - vp1.x)).signum();
+/// Total weight of the points on the other side of `horizon` than the image's bottom, seen
+/// from the principal point's column.
+fn weight_above_horizon(centres: &[Point2], weights: &[f64], horizon: Line, pp: Point2) -> f64 {
+    let side = |p: Point2| horizon.signed_distance(p).map(f64::signum);
     let below = side(Point2::new(pp.x, pp.y + 1e7));
     centres
         .iter()
@@ -969,7 +962,8 @@ pub fn aggregate(
     let vp2 = vp1 + h / u;
     let calibration = Calibration::from_vps(vp1, vp2, pp)
         .map_err(|e| not_enough(format!("the estimate is not a valid camera: {e}")))?;
-    let above = weight_above_horizon(&full.centre, &full.weight, vp1, vp2, pp) / effective;
+    let above =
+        weight_above_horizon(&full.centre, &full.weight, calibration.horizon, pp) / effective;
     if above > opts.max_above_horizon {
         return Err(not_enough(format!(
             "the estimated horizon runs through the traffic: {:.0} % of the vehicle weight lies \
