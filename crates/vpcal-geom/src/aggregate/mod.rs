@@ -9,6 +9,7 @@
 
 pub mod reference;
 pub mod robust;
+pub mod tracks;
 
 use crate::point::{BoxPx, Point2};
 

@@ -20,6 +20,14 @@
 //!    to the candidate), then Cauchy-weighted least squares on the angles. The candidate lives
 //!    on the sphere of homogeneous points, so a far VP1 is no special case. Lines are weighted
 //!    by `1 / (D^s_vp1 + 0.05)` when the decoder spread is known.
+//!    **Tracks** ([`super::tracks`]): when boxes of successive frames link into at least
+//!    `min_track_lines` straight tracks and the network's rays scatter around their own VP1 by
+//!    more than `track_above_scatter_deg` (median), VP1 is fitted the same way to the tracks'
+//!    lines instead. Box-centre tracks point at VP1 to ~0.1° on the synthetic suite, where
+//!    the bundled network's rays are off by 3-12° with a bias; on BrnoCompSpeed the two
+//!    better public CNNs' rays scatter by 1.2-2.9° on most videos and are kept (there the
+//!    tracks of the sparse detections, every 10th frame, were off by 0.6-5° against the
+//!    published DubskaCalib VP1).
 //! 3. **Horizon and focal length jointly.** The camera is parametrised by the focal length
 //!    `f`, the horizon's roll `θ` through VP1, and a constant angular bias `δ` of the CNN's VP2
 //!    rays; VP2 is the point of the horizon orthogonal to VP1 for `f` (so every candidate is a
@@ -47,6 +55,7 @@
 //! On the 12 BrnoCompSpeed training videos this is measured against the reference rule by
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
+use super::tracks::{self, TrackOptions};
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
 use crate::point::{BoxPx, Line, Point2};
@@ -99,6 +108,18 @@ pub struct RobustOptions {
     /// Largest share of the vehicle weight whose box centres may lie above the estimated
     /// horizon; more is "not enough evidence" (vehicles stand on the road, below it).
     pub max_above_horizon: f64,
+    /// Link the boxes of successive frames into tracks and fit VP1 to the tracks' lines
+    /// instead of the network's VP1 rays when at least `min_track_lines` tracks qualify
+    /// (`None`: always the network's rays).
+    pub tracks: Option<TrackOptions>,
+    /// Fewest qualifying tracks for VP1 to come from the tracks.
+    pub min_track_lines: usize,
+    /// Inlier threshold (and Cauchy scale) for track lines, degrees.
+    pub track_threshold_deg: f64,
+    /// The tracks replace the network's VP1 rays only when those scatter around their own
+    /// VP1 by more than this (weighted median angle, degrees): well-trained networks on real
+    /// footage (BrnoCompSpeed) scatter less and their VP1 beats box-centre tracks there.
+    pub track_above_scatter_deg: f64,
 }
 
 impl Default for RobustOptions {
@@ -122,6 +143,10 @@ impl Default for RobustOptions {
             min_effective_vehicles: 10.0,
             max_fit_vehicles: 2000,
             max_above_horizon: 0.5,
+            tracks: Some(TrackOptions::default()),
+            min_track_lines: 8,
+            track_threshold_deg: 1.0,
+            track_above_scatter_deg: 3.0,
         }
     }
 }
@@ -144,6 +169,13 @@ pub struct Evidence {
     /// Whether the VP2 points agreed with the VP2 rays, so that the data were trusted over
     /// the priors (false for CNNs that place VP2 far too close).
     pub rays_trusted: bool,
+    /// Tracks whose box centres gave a straight line.
+    pub track_lines: usize,
+    /// Whether VP1 was fitted to the track lines (else to the network's VP1 rays).
+    pub vp1_from_tracks: bool,
+    /// Weighted median angle between the network's VP1 rays and the VP1 they alone give,
+    /// degrees (`None` when they give none).
+    pub vp1_ray_scatter_deg: Option<f64>,
 }
 
 /// The spread of the estimate under resampling of the vehicles.
@@ -483,12 +515,21 @@ fn from_sphere(p: [f64; 3]) -> [f64; 2] {
     [y.atan2(x), w.clamp(-1.0, 1.0).asin()]
 }
 
+/// Lines that should meet at VP1: through `centre[i]` with unit direction `dir[i]` (the
+/// network's per-vehicle VP1 rays, or the vehicles' tracks).
+#[derive(Debug, Clone, Copy)]
+struct LineSet<'a> {
+    centre: &'a [Point2],
+    dir: &'a [Point2],
+}
+
 /// Robust cost of VP1 candidate `q` (sphere parameters).
-fn vp1_cost(q: [f64; 2], prep: &Prepared, w: &[f64], s: f64) -> f64 {
+fn vp1_cost(q: [f64; 2], lines: LineSet, w: &[f64], s: f64) -> f64 {
     let p = sphere(q);
-    prep.centre
+    lines
+        .centre
         .iter()
-        .zip(&prep.dir1)
+        .zip(lines.dir)
         .zip(w)
         .map(|((c, d), w)| {
             let r = sin_angle(p, *c, *d) / s;
@@ -499,13 +540,13 @@ fn vp1_cost(q: [f64; 2], prep: &Prepared, w: &[f64], s: f64) -> f64 {
 
 /// RANSAC over pairs of VP1 lines, then Nelder-Mead on the robust angular cost.
 fn fit_vp1(
-    prep: &Prepared,
+    lines_in: LineSet,
     w: &[f64],
     threshold_deg: f64,
     rng: &mut SplitMix,
     start: Option<[f64; 2]>,
 ) -> Option<[f64; 3]> {
-    let n = prep.centre.len();
+    let n = lines_in.centre.len();
     if n < 2 {
         return None;
     }
@@ -514,10 +555,10 @@ fn fit_vp1(
         Some(q) => q,
         None => {
             // Lines in homogeneous form (scaled): l = (nx, ny, -n.c / SCALE).
-            let lines: Vec<[f64; 3]> = prep
+            let lines: Vec<[f64; 3]> = lines_in
                 .centre
                 .iter()
-                .zip(&prep.dir1)
+                .zip(lines_in.dir)
                 .map(|(c, d)| {
                     let (nx, ny) = (-d.y, d.x);
                     [nx, ny, -(nx * c.x + ny * c.y) / SCALE]
@@ -552,10 +593,10 @@ fn fit_vp1(
                 if p[2] < 0.0 {
                     p = [-p[0], -p[1], -p[2]];
                 }
-                let score: f64 = prep
+                let score: f64 = lines_in
                     .centre
                     .iter()
-                    .zip(&prep.dir1)
+                    .zip(lines_in.dir)
                     .zip(w)
                     .map(|((c, d), w)| {
                         let r = sin_angle(p, *c, *d) / s;
@@ -570,7 +611,7 @@ fn fit_vp1(
         }
     };
     let q = nelder_mead(
-        |q| vp1_cost([q[0], q[1]], prep, w, s),
+        |q| vp1_cost([q[0], q[1]], lines_in, w, s),
         &[q0[0], q0[1]],
         &[0.02, 0.02],
         300,
@@ -798,6 +839,7 @@ fn points_focal(prep: &Prepared, w: &[f64], vp1: Point2, pp: Point2) -> Option<f
 /// fail this check and keep the priors.
 fn fit_camera(
     model: &Vp2Model,
+    vp1_lines: &Vp1Lines,
     w1: &[f64],
     w: &[f64],
     start: Option<[f64; 3]>,
@@ -815,7 +857,7 @@ fn fit_camera(
     if !trusted {
         return (model.vp1, x, false);
     }
-    let s1 = model.opts.vp1_threshold_deg.to_radians().sin();
+    let s1 = vp1_lines.threshold_deg.to_radians().sin();
     let q1 = from_sphere([model.vp1.x / SCALE, model.vp1.y / SCALE, 1.0]);
     let joint = |p: &[f64]| {
         let sp = sphere([p[0], p[1]]);
@@ -824,7 +866,7 @@ fn fit_camera(
         }
         let vp1 = Point2::new(sp[0] / sp[2] * SCALE, sp[1] / sp[2] * SCALE);
         let m = Vp2Model { vp1, ..unbiased };
-        vp1_cost([p[0], p[1]], model.prep, w1, s1) + m.cost(&[p[2], p[3], 0.0], w, false)
+        vp1_cost([p[0], p[1]], vp1_lines.lines(), w1, s1) + m.cost(&[p[2], p[3], 0.0], w, false)
     };
     let p = nelder_mead(
         joint,
@@ -864,6 +906,98 @@ fn sd(v: &[f64]) -> f64 {
     (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt()
 }
 
+/// Fewer VP1 lines than this within the threshold of VP1 is "not enough evidence".
+const MIN_VP1_INLIERS: usize = 5;
+
+/// The lines VP1 is fitted to, with their weights and the Cauchy scale of their angles.
+#[derive(Debug, Clone)]
+struct Vp1Lines {
+    centre: Vec<Point2>,
+    dir: Vec<Point2>,
+    weight: Vec<f64>,
+    threshold_deg: f64,
+    /// Tracks (true) or the network's per-vehicle rays (false).
+    from_tracks: bool,
+}
+
+impl Vp1Lines {
+    fn lines(&self) -> LineSet<'_> {
+        LineSet {
+            centre: &self.centre,
+            dir: &self.dir,
+        }
+    }
+
+    /// Weighted median of the angles between the lines and the directions to `p`, degrees.
+    fn median_residual_deg(&self, p: [f64; 3]) -> Option<f64> {
+        let angles: Vec<f64> = self
+            .centre
+            .iter()
+            .zip(&self.dir)
+            .map(|(c, d)| sin_angle(p, *c, *d).abs().min(1.0).asin().to_degrees())
+            .collect();
+        crate::metrics::weighted_median(&angles, &self.weight)
+    }
+
+    /// Lines within the threshold angle of the homogeneous point `p` (sphere form).
+    fn inliers(&self, p: [f64; 3]) -> usize {
+        let s = self.threshold_deg.to_radians().sin();
+        self.centre
+            .iter()
+            .zip(&self.dir)
+            .filter(|(c, d)| sin_angle(p, **c, **d).abs() < s)
+            .count()
+    }
+}
+
+/// VP1 as a homogeneous point `[x, y, w]` (units of `SCALE` pixels) in frame pixels, when
+/// finite.
+fn vp1_of(p: [f64; 3]) -> Option<Point2> {
+    let v = Point2::new(p[0] / p[2] * SCALE, p[1] / p[2] * SCALE);
+    (p[2] > 1e-9 && v.is_finite()).then_some(v)
+}
+
+/// VP1 from the network's per-vehicle lines: RANSAC, and a second start from the weighted
+/// median of the VP1 points; the better finite solution wins (RANSAC alone can settle in a
+/// poor basin when the lines are nearly parallel).
+fn locate_vp1_from_network(
+    lines: &Vp1Lines,
+    prep: &Prepared,
+    pp: Point2,
+    width: f64,
+    rng: &mut SplitMix,
+) -> Option<[f64; 3]> {
+    let (w, t) = (&lines.weight, lines.threshold_deg);
+    let mut p1 = fit_vp1(lines.lines(), w, t, rng, None)?;
+    let xs: Vec<f64> = prep.vp1.iter().map(|v| v.x).collect();
+    let ys: Vec<f64> = prep.vp1.iter().map(|v| v.y).collect();
+    if let (Some(mx), Some(my)) = (
+        crate::metrics::weighted_median(&xs, w),
+        crate::metrics::weighted_median(&ys, w),
+    ) {
+        let start = from_sphere([mx / SCALE, my / SCALE, 1.0]);
+        let s = t.to_radians().sin();
+        if let Some(alt) = fit_vp1(lines.lines(), w, t, rng, Some(start)) {
+            let cost = |p: [f64; 3]| vp1_cost(from_sphere(p), lines.lines(), w, s);
+            let finite = |p: [f64; 3]| vp1_of(p).is_some_and(|v| (v - pp).norm() < 20.0 * width);
+            if finite(alt) && (!finite(p1) || cost(alt) < cost(p1)) {
+                p1 = alt;
+            }
+        }
+    }
+    Some(p1)
+}
+
+/// The (frame, box) of every pair the tracker may use: a box, a frame and a score above the
+/// threshold (its VPs do not matter).
+fn tracked_boxes(pairs: &[VehicleVps], opts: &RobustOptions) -> Vec<(f64, BoxPx)> {
+    pairs
+        .iter()
+        .filter(|p| p.score > opts.min_score)
+        .filter_map(|p| Some((p.frame?, p.box_px.filter(BoxPx::is_valid)?)))
+        .collect()
+}
+
 /// Estimate the camera from `pairs` with principal point `pp`.
 ///
 /// # Errors
@@ -896,36 +1030,67 @@ pub fn aggregate(
     }
     let prep = full.thinned(opts.max_fit_vehicles);
     let mut rng = SplitMix(opts.seed ^ 0x5EED_CA1B);
-    let w1: Vec<f64> = prep
-        .weight
-        .iter()
-        .zip(&prep.spread1)
-        .map(|(a, b)| a * b)
-        .collect();
-    let mut p1 = fit_vp1(&prep, &w1, opts.vp1_threshold_deg, &mut rng, None)
-        .ok_or_else(|| not_enough("the VP1 lines do not intersect".into()))?;
-    let vp1_of = |p: [f64; 3]| -> Option<Point2> {
-        let v = Point2::new(p[0] / p[2] * SCALE, p[1] / p[2] * SCALE);
-        (p[2] > 1e-9 && v.is_finite()).then_some(v)
+    let track_lines = match &opts.tracks {
+        Some(t) => tracks::track_lines(&tracked_boxes(pairs, opts), t),
+        None => Vec::new(),
     };
-    // A second start from the weighted median of the VP1 points; keep the better finite
-    // solution (RANSAC alone can settle in a poor basin when the lines are nearly parallel).
-    let xs: Vec<f64> = prep.vp1.iter().map(|v| v.x).collect();
-    let ys: Vec<f64> = prep.vp1.iter().map(|v| v.y).collect();
-    if let (Some(mx), Some(my)) = (
-        crate::metrics::weighted_median(&xs, &w1),
-        crate::metrics::weighted_median(&ys, &w1),
-    ) {
-        let start = from_sphere([mx / SCALE, my / SCALE, 1.0]);
-        let s = opts.vp1_threshold_deg.to_radians().sin();
-        if let Some(alt) = fit_vp1(&prep, &w1, opts.vp1_threshold_deg, &mut rng, Some(start)) {
-            let cost = |p: [f64; 3]| vp1_cost(from_sphere(p), &prep, &w1, s);
-            let finite = |p: [f64; 3]| vp1_of(p).is_some_and(|v| (v - pp).norm() < 20.0 * width);
-            if finite(alt) && (!finite(p1) || cost(alt) < cost(p1)) {
-                p1 = alt;
-            }
+    let network_lines = Vp1Lines {
+        centre: prep.centre.clone(),
+        dir: prep.dir1.clone(),
+        weight: prep
+            .weight
+            .iter()
+            .zip(&prep.spread1)
+            .map(|(a, b)| a * b)
+            .collect(),
+        threshold_deg: opts.vp1_threshold_deg,
+        from_tracks: false,
+    };
+    let network = locate_vp1_from_network(&network_lines, &prep, pp, width, &mut rng);
+    // Residuals and inliers are counted on every vehicle, not only the thinned ones the fit
+    // used.
+    let all_network = Vp1Lines {
+        centre: full.centre.clone(),
+        dir: full.dir1.clone(),
+        weight: full
+            .weight
+            .iter()
+            .zip(&full.spread1)
+            .map(|(a, b)| a * b)
+            .collect(),
+        ..network_lines.clone()
+    };
+    let network_scatter = network.and_then(|p| all_network.median_residual_deg(p));
+    let try_tracks = track_lines.len() >= opts.min_track_lines
+        && network_scatter.is_none_or(|s| s > opts.track_above_scatter_deg);
+    let from_tracks = try_tracks
+        .then(|| {
+            let lines = Vp1Lines {
+                centre: track_lines.iter().map(|t| t.point).collect(),
+                dir: track_lines.iter().map(|t| t.dir).collect(),
+                weight: vec![1.0; track_lines.len()],
+                threshold_deg: opts.track_threshold_deg,
+                from_tracks: true,
+            };
+            let p1 = fit_vp1(
+                lines.lines(),
+                &lines.weight,
+                lines.threshold_deg,
+                &mut rng,
+                None,
+            )?;
+            let inliers = lines.inliers(p1);
+            (vp1_of(p1).is_some() && inliers >= MIN_VP1_INLIERS).then_some((lines, p1, inliers))
+        })
+        .flatten();
+    let (vp1_lines, p1, vp1_inliers) = match from_tracks {
+        Some(found) => found,
+        None => {
+            let p1 = network.ok_or_else(|| not_enough("the VP1 lines do not intersect".into()))?;
+            let inliers = all_network.inliers(p1);
+            (network_lines, p1, inliers)
         }
-    }
+    };
     let vp1 = vp1_of(p1).ok_or_else(|| {
         not_enough(
             "VP1 lies at infinity (the road runs parallel to the image plane); \
@@ -933,14 +1098,7 @@ pub fn aggregate(
                 .into(),
         )
     })?;
-    let s1 = opts.vp1_threshold_deg.to_radians().sin();
-    let vp1_inliers = full
-        .centre
-        .iter()
-        .zip(&full.dir1)
-        .filter(|(c, d)| sin_angle(p1, **c, **d).abs() < s1)
-        .count();
-    if vp1_inliers < 5 {
+    if vp1_inliers < MIN_VP1_INLIERS {
         return Err(not_enough(format!(
             "only {vp1_inliers} vehicles agree on a VP1 (within {}°)",
             opts.vp1_threshold_deg
@@ -956,7 +1114,8 @@ pub fn aggregate(
         fixed_bias: None,
         roll_prior: true,
     };
-    let (vp1, x, rays_trusted) = fit_camera(&model, &w1, &prep.weight, None);
+    let (vp1, x, rays_trusted) =
+        fit_camera(&model, &vp1_lines, &vp1_lines.weight, &prep.weight, None);
     let model = Vp2Model { vp1, ..model };
     let (h, u) = model.vp2(x[0], x[1]);
     let vp2 = vp1 + h / u;
@@ -990,6 +1149,9 @@ pub fn aggregate(
         vp1_inliers,
         vp2_inliers,
         rays_trusted,
+        track_lines: track_lines.len(),
+        vp1_from_tracks: vp1_lines.from_tracks,
+        vp1_ray_scatter_deg: network_scatter,
     };
     let confidence = (opts.bootstrap > 0).then(|| {
         let data_only = Vp2Model {
@@ -1009,13 +1171,27 @@ pub fn aggregate(
                 .zip(&counts)
                 .map(|(a, c)| a * c)
                 .collect();
-            let wv1: Vec<f64> = w1.iter().zip(&counts).map(|(a, c)| a * c).collect();
-            let Some(pb) = fit_vp1(&prep, &wv1, opts.vp1_threshold_deg, &mut rng, Some(q1)) else {
+            // Track lines are resampled on their own (one count per track).
+            let counts1: Vec<f64> = if vp1_lines.from_tracks {
+                (0..vp1_lines.weight.len())
+                    .map(|_| rng.poisson1())
+                    .collect()
+            } else {
+                counts.clone()
+            };
+            let wv1: Vec<f64> = vp1_lines
+                .weight
+                .iter()
+                .zip(&counts1)
+                .map(|(a, c)| a * c)
+                .collect();
+            let threshold = vp1_lines.threshold_deg;
+            let Some(pb) = fit_vp1(vp1_lines.lines(), &wv1, threshold, &mut rng, Some(q1)) else {
                 continue;
             };
             let Some(vb) = vp1_of(pb) else { continue };
             let mb = Vp2Model { vp1: vb, ..model };
-            let (vb, xb, _) = fit_camera(&mb, &wv1, &w, Some(x));
+            let (vb, xb, _) = fit_camera(&mb, &vp1_lines, &wv1, &w, Some(x));
             let mb = Vp2Model { vp1: vb, ..model };
             let (hb, ub) = mb.vp2(xb[0], xb[1]);
             fs.push(xb[0].exp());

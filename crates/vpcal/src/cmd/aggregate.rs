@@ -13,8 +13,12 @@ use vpcal_geom::Point2;
 /// Aggregation method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
-    /// Robust line intersection and focal fit (DESIGN.md §7 improved; the default).
+    /// Robust line intersection and focal fit (DESIGN.md §7 improved; the default). VP1 comes
+    /// from the vehicles' tracks when enough boxes of successive frames link into straight
+    /// tracks, else from the network's per-vehicle VP1 rays.
     Robust,
+    /// The robust method with VP1 always from the network's per-vehicle VP1 rays.
+    RobustNetwork,
     /// The paper's medians, exactly as the reference code computed them.
     Reference,
 }
@@ -23,6 +27,7 @@ impl Method {
     pub fn name(self) -> &'static str {
         match self {
             Method::Robust => "robust",
+            Method::RobustNetwork => "robust-network",
             Method::Reference => "reference",
         }
     }
@@ -73,23 +78,35 @@ pub fn aggregate(
                 confidence: serde_json::Value::Null,
             })
         }
-        Method::Robust => {
+        Method::Robust | Method::RobustNetwork => {
+            let defaults = RobustOptions::default();
             let options = RobustOptions {
                 min_score,
                 image_size: Some([f64::from(image_size.0), f64::from(image_size.1)]),
                 bootstrap,
-                ..RobustOptions::default()
+                tracks: defaults.tracks.clone().filter(|_| method == Method::Robust),
+                ..defaults
             };
             let r = robust::aggregate(vehicles, pp, &options)?;
             let e = &r.evidence;
             let mut summary = format!(
                 "robust: {} vehicles, {} used (effective weight {:.0}, {} repeated boxes down-weighted), \
-                 {} VP1 inliers, {} VP2 inliers, roll {:.2}°, {}",
+                 {} VP1 inliers ({}), {} VP2 inliers, roll {:.2}°, {}",
                 e.pairs_in,
                 e.pairs_used,
                 e.effective_vehicles,
                 e.repeated_boxes,
                 e.vp1_inliers,
+                if e.vp1_from_tracks {
+                    format!("VP1 from {} vehicle tracks", e.track_lines)
+                } else {
+                    format!(
+                        "VP1 from the network's rays, median angle {}; {} straight vehicle tracks",
+                        e.vp1_ray_scatter_deg
+                            .map_or("-".to_string(), |s| format!("{s:.1}°")),
+                        e.track_lines
+                    )
+                },
                 e.vp2_inliers,
                 r.roll.to_degrees(),
                 if e.rays_trusted {
@@ -105,7 +122,7 @@ pub fn aggregate(
                 ));
             }
             let evidence = serde_json::json!({
-                "method": "robust",
+                "method": method.name(),
                 "pairs_in": e.pairs_in,
                 "pairs_used": e.pairs_used,
                 "effective_vehicles": e.effective_vehicles,
@@ -113,6 +130,9 @@ pub fn aggregate(
                 "vp1_inliers": e.vp1_inliers,
                 "vp2_inliers": e.vp2_inliers,
                 "rays_trusted": e.rays_trusted,
+                "track_lines": e.track_lines,
+                "vp1_from_tracks": e.vp1_from_tracks,
+                "vp1_ray_scatter_deg": e.vp1_ray_scatter_deg,
                 "roll_deg": r.roll.to_degrees(),
                 "ray_bias_deg": r.ray_bias.to_degrees(),
             });

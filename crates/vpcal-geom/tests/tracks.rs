@@ -1,0 +1,126 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! Linking boxes into tracks and fitting their VP1 lines.
+
+use proptest::prelude::*;
+use vpcal_geom::aggregate::tracks::{fit_line, link, track_lines, TrackOptions};
+use vpcal_geom::{BoxPx, Point2};
+
+/// A box of half size `half` (aspect 0.7) centred on `c`.
+fn box_at(c: Point2, half: f64) -> BoxPx {
+    BoxPx::new(c.x - half, c.y - 0.7 * half, c.x + half, c.y + 0.7 * half)
+}
+
+/// A vehicle driving away towards `vp`: at step `k` its centre is `start` moved towards `vp`
+/// by the perspective factor `s = 1 / (1 + 0.03 k)`, and its box shrinks by the same factor.
+fn receding(vp: Point2, start: Point2, half: f64, k: usize) -> BoxPx {
+    let s = 1.0 / (1.0 + 0.03 * k as f64);
+    box_at(vp + (start - vp) * s, half * s)
+}
+
+fn angle_to(line_point: Point2, dir: Point2, target: Point2) -> f64 {
+    let t = target - line_point;
+    let cross = dir.x * t.y - dir.y * t.x;
+    (cross / t.norm()).abs().asin().to_degrees()
+}
+
+#[test]
+fn two_interleaved_vehicles_give_two_lines_through_vp1() {
+    let vp = Point2::new(1200.0, -150.0);
+    let starts = [Point2::new(500.0, 900.0), Point2::new(1500.0, 950.0)];
+    let mut boxes = Vec::new();
+    for k in 0..15 {
+        for s in starts {
+            boxes.push((k as f64, receding(vp, s, 80.0, k)));
+        }
+    }
+    let tracks = link(&boxes, &TrackOptions::default());
+    assert_eq!(tracks.len(), 2, "{tracks:?}");
+    for t in &tracks {
+        assert_eq!(t.len(), 15);
+        // One vehicle per track: all boxes of a track start from the same side.
+        let side = boxes[t[0]].1.center().x < 1000.0;
+        assert!(t.iter().all(|&i| (boxes[i].1.center().x < 1000.0) == side));
+    }
+    let lines = track_lines(&boxes, &TrackOptions::default());
+    assert_eq!(lines.len(), 2);
+    for l in lines {
+        assert!(angle_to(l.point, l.dir, vp) < 1e-6, "{l:?}");
+        assert!(l.rms < 1e-6 && l.travel > 100.0, "{l:?}");
+    }
+}
+
+#[test]
+fn parked_turning_and_short_tracks_give_no_line() {
+    let opts = TrackOptions::default();
+    // Parked: the same place in 20 frames.
+    let parked: Vec<(f64, BoxPx)> = (0..20)
+        .map(|k| (k as f64, box_at(Point2::new(300.0, 300.0), 40.0)))
+        .collect();
+    let t = link(&parked, &opts);
+    assert_eq!(t.len(), 1);
+    assert!(fit_line(&parked, &t[0], &opts).is_none());
+    // Turning: a quarter circle of radius 400 px.
+    let turning: Vec<(f64, BoxPx)> = (0..20)
+        .map(|k| {
+            let a = k as f64 / 19.0 * std::f64::consts::FRAC_PI_2;
+            let c = Point2::new(400.0 * a.cos(), 400.0 * a.sin());
+            (k as f64, box_at(c, 60.0))
+        })
+        .collect();
+    let t = link(&turning, &opts);
+    assert_eq!(t.len(), 1, "the turn is one track");
+    assert!(fit_line(&turning, &t[0], &opts).is_none());
+    // Too few boxes.
+    let short = &turning[..3];
+    assert!(track_lines(short, &opts).is_empty());
+}
+
+#[test]
+fn boxes_too_far_apart_in_time_do_not_link() {
+    // Sparse frames: the vehicle moves several box sizes between samples.
+    let boxes: Vec<(f64, BoxPx)> = (0..10)
+        .map(|k| {
+            (
+                50.0 * k as f64,
+                box_at(Point2::new(100.0 + 150.0 * k as f64, 500.0), 30.0),
+            )
+        })
+        .collect();
+    let tracks = link(&boxes, &TrackOptions::default());
+    assert_eq!(tracks.len(), 10);
+    assert!(track_lines(&boxes, &TrackOptions::default()).is_empty());
+}
+
+#[test]
+fn a_track_survives_a_missed_detection() {
+    let vp = Point2::new(900.0, -300.0);
+    let boxes: Vec<(f64, BoxPx)> = (0..12)
+        .filter(|&k| k != 5)
+        .map(|k| (k as f64, receding(vp, Point2::new(700.0, 800.0), 60.0, k)))
+        .collect();
+    let tracks = link(&boxes, &TrackOptions::default());
+    assert_eq!(tracks.len(), 1);
+    assert_eq!(tracks[0].len(), 11);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+    #[test]
+    fn every_valid_box_is_in_exactly_one_track(
+        raw in prop::collection::vec((0u8..20, 0.0f64..500.0, 0.0f64..500.0, 5.0f64..80.0), 0..80)
+    ) {
+        let boxes: Vec<(f64, BoxPx)> = raw
+            .iter()
+            .map(|&(f, x, y, s)| (f as f64, BoxPx::new(x, y, x + s, y + 0.8 * s)))
+            .collect();
+        let tracks = link(&boxes, &TrackOptions::default());
+        let mut seen: Vec<usize> = tracks.iter().flatten().copied().collect();
+        seen.sort_unstable();
+        prop_assert_eq!(seen, (0..boxes.len()).collect::<Vec<_>>());
+        for t in &tracks {
+            prop_assert!(!t.is_empty());
+            // Frames strictly increase along a track (one box per frame).
+            prop_assert!(t.windows(2).all(|w| boxes[w[0]].0 < boxes[w[1]].0));
+        }
+    }
+}
