@@ -306,6 +306,25 @@ fn decode_handles_flat_and_nan_heatmaps() {
 }
 
 proptest! {
+    /// Mirroring a crop left-right maps a box-frame VP (x, y) to (-x, y); its target heatmaps
+    /// are then exactly the transposes of the original's (what `VpNet::with_flip_average`
+    /// relies on to map a mirrored crop's heatmaps back).
+    #[test]
+    fn mirrored_vps_have_transposed_targets(x1 in -200.0f64..200.0, y1 in -200.0f64..200.0,
+                                            x2 in -200.0f64..200.0, y2 in -200.0f64..200.0) {
+        let codec = HeatmapCodec::default();
+        let r = codec.resolution;
+        let a = codec.render_targets(Point2::new(x1, y1), Point2::new(x2, y2));
+        let m = codec.render_targets(Point2::new(-x1, y1), Point2::new(-x2, y2));
+        for (ca, cm) in a.chunks_exact(r * r).zip(m.chunks_exact(r * r)) {
+            for i in 0..r {
+                for j in 0..r {
+                    prop_assert_eq!(ca[i * r + j], cm[j * r + i]);
+                }
+            }
+        }
+    }
+
     #[test]
     fn diamond_round_trip(x in -1e4f64..1e4, y in -1e4f64..1e4, d in 0.1f64..10.0) {
         let uv = point_to_diamond([x, y, 1.0], d).unwrap();

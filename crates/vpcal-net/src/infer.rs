@@ -43,6 +43,7 @@ pub struct VpNet {
     device: Device,
     mode: DecodeMode,
     batch_size: usize,
+    flip_average: bool,
 }
 
 impl VpNet {
@@ -57,6 +58,7 @@ impl VpNet {
             device,
             mode: DecodeMode::Centre,
             batch_size: 32,
+            flip_average: false,
         }
     }
 
@@ -153,6 +155,16 @@ impl VpNet {
         self
     }
 
+    /// Also run every crop mirrored left-right and average its heatmaps, mirrored back, with
+    /// the crop's own (test-time augmentation; twice the network work). Mirroring a crop maps
+    /// a box-frame VP `(x, y)` to `(-x, y)`, which in the rotated diamond swaps the two
+    /// heatmap axes, so the mirrored crop's heatmaps are transposed back exactly. A network's
+    /// error that is not mirror-symmetric (a rotation of every VP ray the same way) cancels.
+    pub fn with_flip_average(mut self, on: bool) -> Self {
+        self.flip_average = on;
+        self
+    }
+
     /// The model config.
     pub fn config(&self) -> &ModelConfig {
         &self.config
@@ -220,7 +232,22 @@ impl VpNet {
     /// # Errors
     /// As [`VpNet::heatmaps`].
     pub fn predict_prepared(&self, images: &[f32]) -> Result<Vec<CropPrediction>, NetError> {
-        let heat = self.heatmaps(images)?;
+        let mut heat = self.heatmaps(images)?;
+        if self.flip_average {
+            let s = self.config.input_size;
+            let mirrored = self.heatmaps(&mirror_rows(images, s))?;
+            let r = self.codec.resolution;
+            for (h, m) in heat
+                .chunks_exact_mut(r * r)
+                .zip(mirrored.chunks_exact(r * r))
+            {
+                for i in 0..r {
+                    for j in 0..r {
+                        h[i * r + j] = 0.5 * (h[i * r + j] + m[j * r + i]);
+                    }
+                }
+            }
+        }
         let per = self.codec.len();
         Ok(heat
             .chunks_exact(per)
@@ -240,6 +267,15 @@ impl VpNet {
     pub fn predict(&self, crops: &[RgbImage]) -> Result<Vec<CropPrediction>, NetError> {
         self.predict_prepared(&self.prepare(crops))
     }
+}
+
+/// Mirror every row of planes of `size x size` values left-right.
+fn mirror_rows(images: &[f32], size: usize) -> Vec<f32> {
+    let mut out = images.to_vec();
+    for row in out.chunks_exact_mut(size) {
+        row.reverse();
+    }
+    out
 }
 
 /// The weights file behind a path: the file itself, a checkpoint folder, or a run folder.

@@ -21,13 +21,14 @@
 //!    on the sphere of homogeneous points, so a far VP1 is no special case. Lines are weighted
 //!    by `1 / (D^s_vp1 + 0.05)` when the decoder spread is known.
 //!    **Tracks** ([`super::tracks`]): when boxes of successive frames link into at least
-//!    `min_track_lines` straight tracks and the network's rays scatter around their own VP1 by
-//!    more than `track_above_scatter_deg` (median), VP1 is fitted the same way to the tracks'
-//!    lines instead. Box-centre tracks point at VP1 to ~0.1° on the synthetic suite, where
-//!    the bundled network's rays are off by 3-12° with a bias; on BrnoCompSpeed the two
-//!    better public CNNs' rays scatter by 1.2-2.9° on most videos and are kept (there the
-//!    tracks of the sparse detections, every 10th frame, were off by 0.6-5° against the
-//!    published DubskaCalib VP1).
+//!    `min_track_lines` straight tracks that agree on a VP1, and the network's rays scatter
+//!    around their own VP1 by more than `track_above_scatter_deg` (median) or the track lines
+//!    around theirs by less than `track_residual_ratio` times that, VP1 is fitted the same way
+//!    to the tracks' lines instead. Box-centre tracks point at VP1 to ~0.1° on the synthetic
+//!    suite, where the bundled network's rays are off by 3-12° with a bias; on BrnoCompSpeed
+//!    the two better public CNNs' rays scatter by 1.2-2.9° and the tracks of the sparse
+//!    detections (every 10th frame) by 0.25-0.93°, and the rays are mostly kept: there the
+//!    tracks were 0.6-5° off the published DubskaCalib VP1.
 //! 3. **Horizon and focal length jointly.** The camera is parametrised by the focal length
 //!    `f`, the horizon's roll `θ` through VP1, and a constant angular bias `δ` of the CNN's VP2
 //!    rays; VP2 is the point of the horizon orthogonal to VP1 for `f` (so every candidate is a
@@ -120,6 +121,9 @@ pub struct RobustOptions {
     /// VP1 by more than this (weighted median angle, degrees): well-trained networks on real
     /// footage (BrnoCompSpeed) scatter less and their VP1 beats box-centre tracks there.
     pub track_above_scatter_deg: f64,
+    /// ... or when the track lines' median angle around their own VP1 is below this fraction
+    /// of the network rays' (`evidence.track_residual_deg` vs `vp1_ray_scatter_deg`).
+    pub track_residual_ratio: f64,
 }
 
 impl Default for RobustOptions {
@@ -147,6 +151,7 @@ impl Default for RobustOptions {
             min_track_lines: 8,
             track_threshold_deg: 1.0,
             track_above_scatter_deg: 3.0,
+            track_residual_ratio: 0.15,
         }
     }
 }
@@ -176,6 +181,9 @@ pub struct Evidence {
     /// Weighted median angle between the network's VP1 rays and the VP1 they alone give,
     /// degrees (`None` when they give none).
     pub vp1_ray_scatter_deg: Option<f64>,
+    /// Median angle between the track lines and the VP1 they alone give, degrees (`None`
+    /// without enough agreeing tracks).
+    pub track_residual_deg: Option<f64>,
 }
 
 /// The spread of the estimate under resampling of the vehicles.
@@ -1061,9 +1069,8 @@ pub fn aggregate(
         ..network_lines.clone()
     };
     let network_scatter = network.and_then(|p| all_network.median_residual_deg(p));
-    let try_tracks = track_lines.len() >= opts.min_track_lines
-        && network_scatter.is_none_or(|s| s > opts.track_above_scatter_deg);
-    let from_tracks = try_tracks
+    // VP1 from the tracks alone, when there are enough of them and they agree.
+    let tracked = (track_lines.len() >= opts.min_track_lines)
         .then(|| {
             let lines = Vp1Lines {
                 centre: track_lines.iter().map(|t| t.point).collect(),
@@ -1072,17 +1079,25 @@ pub fn aggregate(
                 threshold_deg: opts.track_threshold_deg,
                 from_tracks: true,
             };
-            let p1 = fit_vp1(
-                lines.lines(),
-                &lines.weight,
-                lines.threshold_deg,
-                &mut rng,
-                None,
-            )?;
+            let t = lines.threshold_deg;
+            let p1 = fit_vp1(lines.lines(), &lines.weight, t, &mut rng, None)?;
             let inliers = lines.inliers(p1);
-            (vp1_of(p1).is_some() && inliers >= MIN_VP1_INLIERS).then_some((lines, p1, inliers))
+            let residual = lines.median_residual_deg(p1)?;
+            (vp1_of(p1).is_some() && inliers >= MIN_VP1_INLIERS)
+                .then_some((lines, p1, inliers, residual))
         })
         .flatten();
+    let track_residual = tracked.as_ref().map(|t| t.3);
+    let use_tracks = match (&tracked, network_scatter) {
+        (None, _) => false,
+        (Some(_), None) => true,
+        (Some(t), Some(scatter)) => {
+            scatter > opts.track_above_scatter_deg || t.3 < opts.track_residual_ratio * scatter
+        }
+    };
+    let from_tracks = tracked
+        .filter(|_| use_tracks)
+        .map(|(lines, p1, inliers, _)| (lines, p1, inliers));
     let (vp1_lines, p1, vp1_inliers) = match from_tracks {
         Some(found) => found,
         None => {
@@ -1152,6 +1167,7 @@ pub fn aggregate(
         track_lines: track_lines.len(),
         vp1_from_tracks: vp1_lines.from_tracks,
         vp1_ray_scatter_deg: network_scatter,
+        track_residual_deg: track_residual,
     };
     let confidence = (opts.bootstrap > 0).then(|| {
         let data_only = Vp2Model {

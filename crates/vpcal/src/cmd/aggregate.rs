@@ -46,6 +46,11 @@ pub struct Aggregated {
     pub confidence: serde_json::Value,
 }
 
+/// An optional angle for a summary line.
+fn deg(a: Option<f64>) -> String {
+    a.map_or("-".to_string(), |a| format!("{a:.2}°"))
+}
+
 /// Aggregate with `method`; `image_size` is used by the robust method's priors.
 ///
 /// # Errors
@@ -98,13 +103,18 @@ pub fn aggregate(
                 e.repeated_boxes,
                 e.vp1_inliers,
                 if e.vp1_from_tracks {
-                    format!("VP1 from {} vehicle tracks", e.track_lines)
+                    format!(
+                        "VP1 from {} vehicle tracks, median angle {}; the network's rays {}",
+                        e.track_lines,
+                        deg(e.track_residual_deg),
+                        deg(e.vp1_ray_scatter_deg)
+                    )
                 } else {
                     format!(
-                        "VP1 from the network's rays, median angle {}; {} straight vehicle tracks",
-                        e.vp1_ray_scatter_deg
-                            .map_or("-".to_string(), |s| format!("{s:.1}°")),
-                        e.track_lines
+                        "VP1 from the network's rays, median angle {}; {} straight vehicle tracks, {}",
+                        deg(e.vp1_ray_scatter_deg),
+                        e.track_lines,
+                        deg(e.track_residual_deg)
                     )
                 },
                 e.vp2_inliers,
@@ -133,6 +143,7 @@ pub fn aggregate(
                 "track_lines": e.track_lines,
                 "vp1_from_tracks": e.vp1_from_tracks,
                 "vp1_ray_scatter_deg": e.vp1_ray_scatter_deg,
+                "track_residual_deg": e.track_residual_deg,
                 "roll_deg": r.roll.to_degrees(),
                 "ray_bias_deg": r.ray_bias.to_degrees(),
             });
