@@ -148,7 +148,7 @@ impl Default for RobustOptions {
             max_fit_vehicles: 2000,
             max_above_horizon: 0.5,
             tracks: Some(TrackOptions::default()),
-            min_track_lines: 8,
+            min_track_lines: 5,
             track_threshold_deg: 1.0,
             track_above_scatter_deg: 3.0,
             track_residual_ratio: 0.15,
