@@ -2,11 +2,14 @@
 //! direction, and the VP directions the network gave for a sample of vehicles.
 //!
 //! Colours: horizon yellow, road grid cyan, boxes white, directions towards VP1 red and
-//! towards VP2 green (the same colours as the synthetic ground-truth pictures).
+//! towards VP2 green (the same colours as the synthetic ground-truth pictures), and the paths
+//! of the straight vehicle tracks (the aggregator's VP1 evidence when the network's rays
+//! scatter) orange.
 
 use image::{Rgb, RgbImage};
+use vpcal_geom::aggregate::tracks::{self, TrackOptions};
 use vpcal_geom::camera::Calibration;
-use vpcal_geom::Point2;
+use vpcal_geom::{BoxPx, Point2};
 use vpcal_synth::sheet::draw_line;
 
 use super::calibrate::VehicleRecord;
@@ -16,6 +19,7 @@ const CYAN: Rgb<u8> = Rgb([0, 220, 255]);
 const RED: Rgb<u8> = Rgb([255, 40, 40]);
 const GREEN: Rgb<u8> = Rgb([40, 230, 40]);
 const WHITE: Rgb<u8> = Rgb([255, 255, 255]);
+const ORANGE: Rgb<u8> = Rgb([255, 140, 0]);
 
 /// How many vehicles get their boxes and VP directions drawn.
 const SAMPLE_VEHICLES: usize = 16;
@@ -169,10 +173,39 @@ fn draw_grid(img: &mut RgbImage, cal: &Calibration, records: &[VehicleRecord]) {
     }
 }
 
-/// The overlay of a calibration on `picture`.
-pub fn draw(picture: &RgbImage, cal: &Calibration, records: &[VehicleRecord]) -> RgbImage {
+/// The paths of the straight vehicle tracks among the records with a score above `min_score`
+/// (the same tracks the robust aggregator fits VP1 to), each from its first to its last box
+/// centre along the fitted line.
+fn draw_tracks(img: &mut RgbImage, records: &[VehicleRecord], min_score: f64) {
+    let boxes: Vec<(f64, BoxPx)> = records
+        .iter()
+        .filter(|r| f64::from(r.score) > min_score)
+        .map(|r| (r.frame as f64, r.crop_box))
+        .collect();
+    let w = line_width(img);
+    for t in tracks::track_lines(&boxes, &TrackOptions::default()) {
+        let (p, d, h) = (t.point, t.dir, t.travel / 2.0);
+        draw_line(
+            img,
+            [p.x - d.x * h, p.y - d.y * h],
+            [p.x + d.x * h, p.y + d.y * h],
+            ORANGE,
+            w,
+        );
+    }
+}
+
+/// The overlay of a calibration on `picture`; `min_score` selects the boxes whose tracks are
+/// drawn.
+pub fn draw(
+    picture: &RgbImage,
+    cal: &Calibration,
+    records: &[VehicleRecord],
+    min_score: f64,
+) -> RgbImage {
     let mut img = picture.clone();
     draw_grid(&mut img, cal, records);
+    draw_tracks(&mut img, records, min_score);
     draw_vehicles(&mut img, records);
     let w = line_width(&img);
     let [a, b, c] = cal.horizon.0;
