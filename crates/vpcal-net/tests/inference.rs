@@ -5,17 +5,6 @@ use burn::tensor::Device;
 use image::{Rgb, RgbImage};
 use vpcal_net::{ModelConfig, StackedHourglass, VpNet};
 
-fn config() -> ModelConfig {
-    ModelConfig {
-        input_size: 32,
-        heatmap_size: 16,
-        front_channels: 8,
-        channels: 16,
-        depth: 2,
-        ..ModelConfig::tiny()
-    }
-}
-
 /// A crop with structure (an asymmetric gradient and a bar) so that it differs from its mirror.
 fn crop() -> RgbImage {
     RgbImage::from_fn(32, 32, |x, y| {
@@ -31,7 +20,7 @@ fn crop() -> RgbImage {
 #[test]
 fn flip_average_maps_a_mirrored_crop_to_transposed_heatmaps() {
     let device = Device::flex();
-    let config = config();
+    let config = ModelConfig::tiny();
     let model = StackedHourglass::new(&config, &device);
     let net = VpNet::new(model, config.clone(), &device).with_flip_average(true);
     let original = crop();

@@ -958,6 +958,24 @@ impl Vp1Lines {
     }
 }
 
+impl Prepared {
+    /// The network's VP1 rays, weighted by the vehicle weight and the decoder spread.
+    fn network_vp1_lines(&self, threshold_deg: f64) -> Vp1Lines {
+        Vp1Lines {
+            centre: self.centre.clone(),
+            dir: self.dir1.clone(),
+            weight: self
+                .weight
+                .iter()
+                .zip(&self.spread1)
+                .map(|(a, b)| a * b)
+                .collect(),
+            threshold_deg,
+            from_tracks: false,
+        }
+    }
+}
+
 /// VP1 as a homogeneous point `[x, y, w]` (units of `SCALE` pixels) in frame pixels, when
 /// finite.
 fn vp1_of(p: [f64; 3]) -> Option<Point2> {
@@ -1042,32 +1060,11 @@ pub fn aggregate(
         Some(t) => tracks::track_lines(&tracked_boxes(pairs, opts), t),
         None => Vec::new(),
     };
-    let network_lines = Vp1Lines {
-        centre: prep.centre.clone(),
-        dir: prep.dir1.clone(),
-        weight: prep
-            .weight
-            .iter()
-            .zip(&prep.spread1)
-            .map(|(a, b)| a * b)
-            .collect(),
-        threshold_deg: opts.vp1_threshold_deg,
-        from_tracks: false,
-    };
+    let network_lines = prep.network_vp1_lines(opts.vp1_threshold_deg);
     let network = locate_vp1_from_network(&network_lines, &prep, pp, width, &mut rng);
     // Residuals and inliers are counted on every vehicle, not only the thinned ones the fit
     // used.
-    let all_network = Vp1Lines {
-        centre: full.centre.clone(),
-        dir: full.dir1.clone(),
-        weight: full
-            .weight
-            .iter()
-            .zip(&full.spread1)
-            .map(|(a, b)| a * b)
-            .collect(),
-        ..network_lines.clone()
-    };
+    let all_network = full.network_vp1_lines(opts.vp1_threshold_deg);
     let network_scatter = network.and_then(|p| all_network.median_residual_deg(p));
     // VP1 from the tracks alone, when there are enough of them and they agree.
     let tracked = (track_lines.len() >= opts.min_track_lines)
@@ -1181,26 +1178,19 @@ pub fn aggregate(
         let q1 = from_sphere(p1);
         for _ in 0..opts.bootstrap {
             let counts: Vec<f64> = (0..prep.weight.len()).map(|_| rng.poisson1()).collect();
-            let w: Vec<f64> = prep
-                .weight
-                .iter()
-                .zip(&counts)
-                .map(|(a, c)| a * c)
-                .collect();
-            // Track lines are resampled on their own (one count per track).
-            let counts1: Vec<f64> = if vp1_lines.from_tracks {
-                (0..vp1_lines.weight.len())
-                    .map(|_| rng.poisson1())
-                    .collect()
-            } else {
-                counts.clone()
+            let scaled = |w: &[f64], c: &[f64]| -> Vec<f64> {
+                w.iter().zip(c).map(|(a, c)| a * c).collect()
             };
-            let wv1: Vec<f64> = vp1_lines
-                .weight
-                .iter()
-                .zip(&counts1)
-                .map(|(a, c)| a * c)
-                .collect();
+            let w = scaled(&prep.weight, &counts);
+            // Track lines are resampled on their own (one count per track).
+            let wv1 = if vp1_lines.from_tracks {
+                let counts1: Vec<f64> = (0..vp1_lines.weight.len())
+                    .map(|_| rng.poisson1())
+                    .collect();
+                scaled(&vp1_lines.weight, &counts1)
+            } else {
+                scaled(&vp1_lines.weight, &counts)
+            };
             let threshold = vp1_lines.threshold_deg;
             let Some(pb) = fit_vp1(vp1_lines.lines(), &wv1, threshold, &mut rng, Some(q1)) else {
                 continue;
