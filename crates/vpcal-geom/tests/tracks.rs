@@ -124,3 +124,25 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_car_moving_most_of_its_length_between_samples_still_links() {
+    // 45 px per step with boxes 60 x 42 (size 50): successive boxes overlap with IoU 0.14,
+    // too little to start a track; the size-and-distance rule starts it, the velocity
+    // carries it.
+    let boxes: Vec<(f64, BoxPx)> = (0..8)
+        .map(|k| {
+            (
+                5.0 * k as f64,
+                box_at(Point2::new(100.0 + 45.0 * k as f64, 500.0), 30.0),
+            )
+        })
+        .collect();
+    let opts = TrackOptions::default();
+    assert_eq!(link(&boxes, &opts), vec![(0..8).collect::<Vec<_>>()]);
+    let strict = TrackOptions {
+        first_link_sizes: 0.0,
+        ..opts
+    };
+    assert_eq!(link(&boxes, &strict).len(), 8);
+}

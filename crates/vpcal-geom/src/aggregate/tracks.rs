@@ -19,6 +19,10 @@ use crate::point::{BoxPx, Point2};
 pub struct TrackOptions {
     /// A box continues a track when it overlaps the track's predicted box with IoU above this.
     pub min_iou: f64,
+    /// A track of one box (no velocity yet) is also continued by a box of similar size (within
+    /// a factor 1.5) whose centre lies within this many box sizes (0: overlap only). Sparse
+    /// frames need it: a car moves most of its length between samples.
+    pub first_link_sizes: f64,
     /// A track ends when it found no box for more than this many median frame steps.
     pub max_gap_steps: f64,
     /// A track needs at least this many boxes to give a line.
@@ -35,6 +39,7 @@ impl Default for TrackOptions {
     fn default() -> Self {
         TrackOptions {
             min_iou: 0.2,
+            first_link_sizes: 1.0,
             max_gap_steps: 2.5,
             min_boxes: 5,
             min_travel_boxes: 1.0,
@@ -91,6 +96,10 @@ pub fn link(boxes: &[(f64, BoxPx)], opts: &TrackOptions) -> Vec<Vec<usize>> {
                 let iou = predicted.iou(&boxes[i].1);
                 if iou > opts.min_iou {
                     candidates.push((iou, ti, bi));
+                } else if t.len() == 1 {
+                    if let Some(score) = near(&predicted, &boxes[i].1, opts.first_link_sizes) {
+                        candidates.push((score * opts.min_iou, ti, bi));
+                    }
                 }
             }
         }
@@ -113,6 +122,17 @@ pub fn link(boxes: &[(f64, BoxPx)], opts: &TrackOptions) -> Vec<Vec<usize>> {
     }
     done.extend(active);
     done
+}
+
+/// For a box `b` near `a` (similar size, centres within `sizes` box sizes), a score in (0, 1]
+/// that falls with the distance.
+fn near(a: &BoxPx, b: &BoxPx, sizes: f64) -> Option<f64> {
+    let size = |x: &BoxPx| (x.width() * x.height()).sqrt();
+    let (sa, sb) = (size(a), size(b));
+    let ratio = sa.max(sb) / sa.min(sb);
+    let limit = sizes * sa.max(sb);
+    let d = (a.center() - b.center()).norm();
+    (ratio < 1.5 && d < limit).then(|| 1.0 - d / limit)
 }
 
 /// Where the track's last box will be at `frame`: shifted by the track's last image velocity
