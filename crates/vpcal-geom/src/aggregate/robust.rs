@@ -56,7 +56,7 @@
 //! On the 12 BrnoCompSpeed training videos this is measured against the reference rule by
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
-use super::tracks::{self, TrackOptions};
+use super::tracks::{self, TrackLine, TrackOptions};
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
 use crate::point::{BoxPx, Line, Point2};
@@ -214,6 +214,8 @@ pub struct RobustResult {
     pub evidence: Evidence,
     /// `None` when `bootstrap` is 0.
     pub confidence: Option<Confidence>,
+    /// The straight vehicle tracks found (whether or not VP1 came from them).
+    pub track_lines: Vec<TrackLine>,
 }
 
 /// The Geman-McClure loss `r² / (1 + r²)`: quadratic near zero, bounded by 1, so that
@@ -1230,5 +1232,6 @@ pub fn aggregate(
         ray_bias: x[2],
         evidence,
         confidence: confidence.flatten(),
+        track_lines,
     })
 }

@@ -7,6 +7,7 @@ use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
 use vpcal_formats::reference::read_vpout;
 use vpcal_geom::aggregate::reference::{self, ReferenceOptions};
 use vpcal_geom::aggregate::robust::{self, RobustOptions};
+use vpcal_geom::aggregate::tracks::TrackLine;
 use vpcal_geom::aggregate::{AggregateError, VehicleVps};
 use vpcal_geom::Point2;
 
@@ -44,6 +45,8 @@ pub struct Aggregated {
     pub evidence: serde_json::Value,
     /// Bootstrap spread of the robust method (null without bootstrap or for `reference`).
     pub confidence: serde_json::Value,
+    /// The straight vehicle tracks the robust method found (empty for the other methods).
+    pub track_lines: Vec<TrackLine>,
 }
 
 /// An optional angle for a summary line.
@@ -81,6 +84,7 @@ pub fn aggregate(
                     "pairs_used": r.pairs_used,
                 }),
                 confidence: serde_json::Value::Null,
+                track_lines: Vec::new(),
             })
         }
         Method::Robust | Method::RobustNetwork => {
@@ -165,6 +169,7 @@ pub fn aggregate(
                 summary,
                 evidence,
                 confidence,
+                track_lines: r.track_lines,
             })
         }
     }

@@ -596,7 +596,7 @@ pub fn run(args: Args) -> Result<std::process::ExitCode> {
                 let Some(picture) = &out.picture else {
                     bail!("no frame to draw the overlay on");
                 };
-                let img = overlay::draw(picture, &cal, &out.records, args.pipeline.min_score);
+                let img = overlay::draw(picture, &cal, &out.records, &agg.track_lines);
                 vpcal_video::draw::save_png(&img, path)?;
             }
             if args.json {

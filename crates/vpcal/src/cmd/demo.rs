@@ -142,7 +142,7 @@ pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
     super::calibrate::write_bcs_system(&results.join("system_vpcal.json"), &cal)?;
     let overlay_path = a.out.join("overlay.png");
     if let Some(picture) = &out.picture {
-        let img = overlay::draw(picture, &cal, &out.records, a.pipeline.min_score);
+        let img = overlay::draw(picture, &cal, &out.records, &agg.track_lines);
         vpcal_video::draw::save_png(&img, &overlay_path)?;
     }
 

@@ -7,9 +7,9 @@
 //! scatter) orange.
 
 use image::{Rgb, RgbImage};
-use vpcal_geom::aggregate::tracks::{self, TrackOptions};
+use vpcal_geom::aggregate::tracks::TrackLine;
 use vpcal_geom::camera::Calibration;
-use vpcal_geom::{BoxPx, Point2};
+use vpcal_geom::Point2;
 use vpcal_synth::sheet::draw_line;
 
 use super::calibrate::VehicleRecord;
@@ -173,17 +173,11 @@ fn draw_grid(img: &mut RgbImage, cal: &Calibration, records: &[VehicleRecord]) {
     }
 }
 
-/// The paths of the straight vehicle tracks among the records with a score above `min_score`
-/// (the same tracks the robust aggregator fits VP1 to), each from its first to its last box
-/// centre along the fitted line.
-fn draw_tracks(img: &mut RgbImage, records: &[VehicleRecord], min_score: f64) {
-    let boxes: Vec<(f64, BoxPx)> = records
-        .iter()
-        .filter(|r| f64::from(r.score) > min_score)
-        .map(|r| (r.frame as f64, r.crop_box))
-        .collect();
+/// The paths of the straight vehicle tracks, each from its first to its last box centre
+/// along the fitted line.
+fn draw_tracks(img: &mut RgbImage, tracks: &[TrackLine]) {
     let w = line_width(img);
-    for t in tracks::track_lines(&boxes, &TrackOptions::default()) {
+    for t in tracks {
         let (p, d, h) = (t.point, t.dir, t.travel / 2.0);
         draw_line(
             img,
@@ -195,17 +189,17 @@ fn draw_tracks(img: &mut RgbImage, records: &[VehicleRecord], min_score: f64) {
     }
 }
 
-/// The overlay of a calibration on `picture`; `min_score` selects the boxes whose tracks are
-/// drawn.
+/// The overlay of a calibration on `picture`, with the straight vehicle tracks the
+/// aggregation found.
 pub fn draw(
     picture: &RgbImage,
     cal: &Calibration,
     records: &[VehicleRecord],
-    min_score: f64,
+    tracks: &[TrackLine],
 ) -> RgbImage {
     let mut img = picture.clone();
     draw_grid(&mut img, cal, records);
-    draw_tracks(&mut img, records, min_score);
+    draw_tracks(&mut img, tracks);
     draw_vehicles(&mut img, records);
     let w = line_width(&img);
     let [a, b, c] = cal.horizon.0;
