@@ -4,7 +4,8 @@
 //! outliers.
 
 use proptest::prelude::*;
-use vpcal_geom::aggregate::robust::{aggregate, RobustOptions};
+use vpcal_geom::aggregate::edgelets::Edgelet;
+use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::{BoxPx, Point2};
@@ -400,4 +401,95 @@ fn vehicle_tracks_replace_scattered_biased_vp1_rays() {
     // ... with exact boxes they do.
     let exact = aggregate(&traffic(&scene, 0.0, 1.0, 0.0, 4), scene.pp, &opts).unwrap();
     assert!(exact.evidence.vp1_from_tracks, "{:?}", exact.evidence);
+}
+
+/// Per vehicle: 20 edgelets inside its box pointing at the true VP2 (0.5° noise), 10 along
+/// the direction to VP1 (the vehicle's length; to be excluded) and 4 at random angles.
+fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Edgelet>> {
+    let mut rng = Lcg(seed);
+    let vp1 = scene.vp([0.0, 1.0, 0.0]);
+    let vp2 = scene.vp([1.0, 0.0, 0.0]);
+    vehicles
+        .iter()
+        .map(|v| {
+            let b = v.box_px.unwrap();
+            (0..34)
+                .map(|k| {
+                    let p = Point2::new(
+                        b.x0 + (b.x1 - b.x0) * rng.next(),
+                        b.y0 + (b.y1 - b.y0) * rng.next(),
+                    );
+                    let to = |q: Point2| (q.y - p.y).atan2(q.x - p.x);
+                    let angle = match k {
+                        0..20 => to(vp2) + 0.5f64.to_radians() * rng.normal(),
+                        20..30 => to(vp1),
+                        _ => std::f64::consts::PI * rng.next(),
+                    };
+                    Edgelet {
+                        x: p.x,
+                        y: p.y,
+                        angle,
+                        strength: 50.0,
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn edgelets_give_the_roll_and_a_near_vp2s_focal_length() {
+    let opts = RobustOptions {
+        image_size: Some([1920.0, 1080.0]),
+        bootstrap: 0,
+        ..RobustOptions::default()
+    };
+    let horizon_error = |scene: &Scene, c: &Calibration| {
+        let truth = Calibration::from_vps(
+            scene.vp([0.0, 1.0, 0.0]),
+            scene.vp([1.0, 0.0, 0.0]),
+            scene.pp,
+        )
+        .unwrap();
+        (c.horizon.angle() - truth.horizon.angle())
+            .to_degrees()
+            .abs()
+    };
+    // A rolled camera (3°) and a CNN-like network: VP2 at 0.1-0.3 of its distance, so the
+    // focal prior and the roll prior (around 0°) decide without edgelets.
+    let scene = Scene::new(1100.0, 0.4, 3f64.to_radians(), 0.5, 8.0);
+    let vehicles = cloud_with(&scene, 300, 0.2, 11, (0.1, 0.3));
+    let without = aggregate(&vehicles, scene.pp, &opts).unwrap();
+    let e0 = horizon_error(&scene, &without.calibration);
+    let f0 = (without.calibration.focal_px / scene.f - 1.0).abs();
+    assert!(
+        e0 > 0.5 || f0 > 0.1,
+        "the priors alone were already right: {e0}°, f {f0}"
+    );
+    let edges = edgelets_for(&scene, &vehicles, 12);
+    let with = aggregate_with_edgelets(&vehicles, &edges, scene.pp, &opts).unwrap();
+    let ev = with.evidence;
+    assert!(ev.roll_from_edgelets && ev.focal_from_edgelets, "{ev:?}");
+    assert!(ev.edgelet_vehicles >= 200, "{ev:?}");
+    let e1 = horizon_error(&scene, &with.calibration);
+    let f1 = (with.calibration.focal_px / scene.f - 1.0).abs();
+    assert!(e1 < 0.2, "horizon off by {e1}° (without edgelets {e0}°)");
+    assert!(f1 < 0.03, "f off by {f1} (without edgelets {f0})");
+    // Edgelets of a mismatching length are a caller's bug.
+    let short = std::panic::catch_unwind(|| {
+        aggregate_with_edgelets(&vehicles, &edges[1..], scene.pp, &opts)
+    });
+    assert!(short.is_err());
+
+    // Looking along the road (yaw 0.05): VP2 lies ~30 image widths away; the edgelets are
+    // nearly parallel, so they give the roll but not the focal length.
+    let far = Scene::new(3000.0, 0.15, 2f64.to_radians(), 0.05, 8.0);
+    let vehicles = cloud_with(&far, 300, 0.2, 13, (0.1, 0.3));
+    let edges = edgelets_for(&far, &vehicles, 14);
+    let r = aggregate_with_edgelets(&vehicles, &edges, far.pp, &opts).unwrap();
+    let ev = r.evidence;
+    assert!(ev.roll_from_edgelets && !ev.focal_from_edgelets, "{ev:?}");
+    assert!(ev.edgelet_vp2_widths.unwrap() > 10.0, "{ev:?}");
+    let e = horizon_error(&far, &r.calibration);
+    assert!(e < 0.2, "horizon off by {e}°");
 }

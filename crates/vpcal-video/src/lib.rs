@@ -27,6 +27,7 @@
 pub mod crop;
 pub mod detect;
 pub mod draw;
+pub mod edgelets;
 pub mod edges;
 pub mod error;
 pub mod filter;

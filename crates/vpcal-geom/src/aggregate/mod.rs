@@ -7,6 +7,7 @@
 //!   length, roll and the CNN's ray bias fitted to the vehicles' VP2 rays with weak priors;
 //!   duplicate and small boxes down-weighted; bootstrap confidence.
 
+pub mod edgelets;
 pub mod reference;
 pub mod robust;
 pub mod tracks;

@@ -56,6 +56,7 @@
 //! On the 12 BrnoCompSpeed training videos this is measured against the reference rule by
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
+use super::edgelets::{self as edge, Edgelet, EdgeletFitOptions};
 use super::tracks::{self, TrackLine, TrackOptions};
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
@@ -124,6 +125,10 @@ pub struct RobustOptions {
     /// ... or when the track lines' median angle around their own VP1 is below this fraction
     /// of the network rays' (`evidence.track_residual_deg` vs `vp1_ray_scatter_deg`).
     pub track_residual_ratio: f64,
+    /// Fit the horizon's roll (and, where VP2 is near enough, the focal length) to edgelets
+    /// inside the vehicle boxes when they are given ([`aggregate_with_edgelets`]); `None`:
+    /// never.
+    pub edgelets: Option<EdgeletFitOptions>,
 }
 
 impl Default for RobustOptions {
@@ -152,6 +157,7 @@ impl Default for RobustOptions {
             track_threshold_deg: 1.0,
             track_above_scatter_deg: 3.0,
             track_residual_ratio: 0.15,
+            edgelets: Some(EdgeletFitOptions::default()),
         }
     }
 }
@@ -184,6 +190,20 @@ pub struct Evidence {
     /// Median angle between the track lines and the VP1 they alone give, degrees (`None`
     /// without enough agreeing tracks).
     pub track_residual_deg: Option<f64>,
+    /// Edgelets (and vehicles with edgelets) the edgelet fit used; 0 without one.
+    pub edgelets: usize,
+    pub edgelet_vehicles: usize,
+    /// Whether the horizon's roll, and the focal length, came from the edgelets.
+    pub roll_from_edgelets: bool,
+    pub focal_from_edgelets: bool,
+    /// The edgelet fit's focal length (px) and the bootstrap spread of its roll (degrees),
+    /// whether or not they were used.
+    pub edgelet_focal_px: Option<f64>,
+    pub edgelet_roll_sd_deg: Option<f64>,
+    /// Half of `ln(p84 / p16)` of the edgelet fit's bootstrap focal lengths, and the distance
+    /// of its VP2 from the principal point in image widths (the focal length's two gates).
+    pub edgelet_focal_log_spread: Option<f64>,
+    pub edgelet_vp2_widths: Option<f64>,
 }
 
 /// The spread of the estimate under resampling of the vehicles.
@@ -228,7 +248,7 @@ fn geman_mcclure(r: f64) -> f64 {
 
 /// A small deterministic PRNG (SplitMix64), so that the geometry crate needs no dependency.
 #[derive(Debug, Clone)]
-struct SplitMix(u64);
+pub(super) struct SplitMix(pub(super) u64);
 
 impl SplitMix {
     fn next_u64(&mut self) -> u64 {
@@ -243,7 +263,7 @@ impl SplitMix {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
     /// Poisson(1) count (inverse transform).
-    fn poisson1(&mut self) -> f64 {
+    pub(super) fn poisson1(&mut self) -> f64 {
         let u = self.next_f64();
         let mut k = 0.0;
         let mut p = (-1.0f64).exp();
@@ -312,7 +332,7 @@ fn unit(v: Point2) -> Option<Point2> {
 }
 
 /// Wrap an angle difference of two lines to (-pi/2, pi/2].
-fn line_angle_diff(a: f64) -> f64 {
+pub(super) fn line_angle_diff(a: f64) -> f64 {
     let pi = std::f64::consts::PI;
     a - pi * (a / pi).round()
 }
@@ -630,7 +650,12 @@ fn fit_vp1(
 }
 
 /// Minimise `f` from `x0` with initial steps `step` (Nelder-Mead, standard coefficients).
-fn nelder_mead(f: impl Fn(&[f64]) -> f64, x0: &[f64], step: &[f64], iters: usize) -> Vec<f64> {
+pub(super) fn nelder_mead(
+    f: impl Fn(&[f64]) -> f64,
+    x0: &[f64],
+    step: &[f64],
+    iters: usize,
+) -> Vec<f64> {
     let n = x0.len();
     let mut simplex: Vec<(Vec<f64>, f64)> = Vec::with_capacity(n + 1);
     simplex.push((x0.to_vec(), f(x0)));
@@ -905,12 +930,12 @@ fn weight_above_horizon(centres: &[Point2], weights: &[f64], horizon: Line, pp: 
         .sum()
 }
 
-fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
+pub(super) fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
     v.sort_by(f64::total_cmp);
     crate::metrics::percentile_sorted(&v, q)
 }
 
-fn sd(v: &[f64]) -> f64 {
+pub(super) fn sd(v: &[f64]) -> f64 {
     let n = v.len() as f64;
     let m = v.iter().sum::<f64>() / n;
     (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt()
@@ -1036,6 +1061,31 @@ pub fn aggregate(
     pp: Point2,
     opts: &RobustOptions,
 ) -> Result<RobustResult, AggregateError> {
+    aggregate_with_edgelets(pairs, &[], pp, opts)
+}
+
+/// [`aggregate`], with the edgelets found inside each vehicle's box (`edgelets[i]` belongs
+/// to `pairs[i]`; an empty slice means none): with `opts.edgelets` set, they give the
+/// horizon's roll, and the focal length where VP2 is near enough to be located
+/// ([`super::edgelets`]).
+///
+/// # Errors
+/// As [`aggregate`].
+///
+/// # Panics
+/// When `edgelets` is neither empty nor as long as `pairs`.
+pub fn aggregate_with_edgelets(
+    pairs: &[VehicleVps],
+    edgelets: &[Vec<Edgelet>],
+    pp: Point2,
+    opts: &RobustOptions,
+) -> Result<RobustResult, AggregateError> {
+    assert!(
+        edgelets.is_empty() || edgelets.len() == pairs.len(),
+        "{} edgelet lists for {} pairs",
+        edgelets.len(),
+        pairs.len()
+    );
     let [width, height] = opts.image_size.unwrap_or([2.0 * pp.x, 2.0 * pp.y]);
     let not_enough = |m: String| AggregateError::NotEnoughEvidence(m);
     if !(width > 0.0 && height > 0.0 && pp.is_finite()) {
@@ -1131,6 +1181,32 @@ pub fn aggregate(
     let (vp1, x, rays_trusted) =
         fit_camera(&model, &vp1_lines, &vp1_lines.weight, &prep.weight, None);
     let model = Vp2Model { vp1, ..model };
+    let edge_fit = opts
+        .edgelets
+        .as_ref()
+        .filter(|_| !edgelets.is_empty())
+        .and_then(|eo| {
+            let vehicles: Vec<Vec<Edgelet>> = pairs
+                .iter()
+                .zip(edgelets)
+                .filter(|(p, _)| p.score > opts.min_score)
+                .filter_map(|(p, e)| {
+                    let b = p.box_px.filter(BoxPx::is_valid)?;
+                    let kept =
+                        edge::near_ray(b.center(), p.vp2, e, eo.gate_vp2_deg, eo.max_per_vehicle);
+                    (!kept.is_empty()).then_some(kept)
+                })
+                .collect();
+            edge::fit(vp1, pp, width, &vehicles, x[1], eo, opts.seed)
+        });
+    let usable = edge_fit.filter(|e| e.roll_usable);
+    let mut x = x;
+    if let Some(e) = usable {
+        x[1] = e.roll;
+        if e.focal_usable {
+            x[0] = e.focal_px.ln();
+        }
+    }
     let (h, u) = model.vp2(x[0], x[1]);
     let vp2 = vp1 + h / u;
     let calibration = Calibration::from_vps(vp1, vp2, pp)
@@ -1167,6 +1243,14 @@ pub fn aggregate(
         vp1_from_tracks: vp1_lines.from_tracks,
         vp1_ray_scatter_deg: network_scatter,
         track_residual_deg: track_residual,
+        edgelets: edge_fit.map_or(0, |e| e.edgelets),
+        edgelet_vehicles: edge_fit.map_or(0, |e| e.vehicles),
+        roll_from_edgelets: usable.is_some(),
+        focal_from_edgelets: usable.is_some_and(|e| e.focal_usable),
+        edgelet_focal_px: edge_fit.map(|e| e.focal_px),
+        edgelet_roll_sd_deg: edge_fit.map(|e| e.roll_sd_deg),
+        edgelet_focal_log_spread: edge_fit.map(|e| e.focal_log_spread()),
+        edgelet_vp2_widths: edge_fit.map(|e| (e.vp2 - pp).norm() / width),
     };
     let confidence = (opts.bootstrap > 0).then(|| {
         let data_only = Vp2Model {
@@ -1217,10 +1301,15 @@ pub fn aggregate(
             .iter()
             .map(|a| line_angle_diff((a - a0).to_radians()).to_degrees())
             .collect();
+        // Where the edgelets decided, their own bootstrap (VP1 fixed) is the spread.
+        let (p16, p84) = match usable.filter(|e| e.focal_usable) {
+            Some(e) => (e.focal_px_p16, e.focal_px_p84),
+            None => (percentile(fs.clone(), 16.0), percentile(fs.clone(), 84.0)),
+        };
         Some(Confidence {
-            focal_px_p16: percentile(fs.clone(), 16.0),
-            focal_px_p84: percentile(fs.clone(), 84.0),
-            horizon_angle_sd_deg: sd(&angles),
+            focal_px_p16: p16,
+            focal_px_p84: p84,
+            horizon_angle_sd_deg: usable.map_or_else(|| sd(&angles), |e| e.roll_sd_deg),
             vp1_sd_px: ((sd(&vx).powi(2) + sd(&vy).powi(2)) / 2.0).sqrt(),
             focal_px_data_only: data_only,
             resamples: fs.len(),

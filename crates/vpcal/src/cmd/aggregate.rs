@@ -5,6 +5,7 @@ use anyhow::{Context, Result};
 use std::path::PathBuf;
 use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
 use vpcal_formats::reference::read_vpout;
+use vpcal_geom::aggregate::edgelets::Edgelet;
 use vpcal_geom::aggregate::reference::{self, ReferenceOptions};
 use vpcal_geom::aggregate::robust::{self, RobustOptions};
 use vpcal_geom::aggregate::tracks::TrackLine;
@@ -60,6 +61,7 @@ fn deg(a: Option<f64>) -> String {
 /// "Not enough evidence" from the method.
 pub fn aggregate(
     vehicles: &[VehicleVps],
+    edgelets: &[Vec<Edgelet>],
     pp: Point2,
     image_size: (u32, u32),
     method: Method,
@@ -96,7 +98,7 @@ pub fn aggregate(
                 tracks: defaults.tracks.clone().filter(|_| method == Method::Robust),
                 ..defaults
             };
-            let r = robust::aggregate(vehicles, pp, &options)?;
+            let r = robust::aggregate_with_edgelets(vehicles, edgelets, pp, &options)?;
             let e = &r.evidence;
             let mut summary = format!(
                 "robust: {} vehicles, {} used (effective weight {:.0}, {} repeated boxes down-weighted), \
@@ -123,10 +125,22 @@ pub fn aggregate(
                 },
                 e.vp2_inliers,
                 r.roll.to_degrees(),
-                if e.rays_trusted {
-                    "VP2 points agree with the rays (data trusted)"
-                } else {
-                    "VP2 points disagree with the rays (focal prior in use)"
+                {
+                    let rays = if e.rays_trusted {
+                        "VP2 points agree with the rays (data trusted)"
+                    } else {
+                        "VP2 points disagree with the rays (focal prior in use)"
+                    };
+                    let edges = format!("{} edgelets on {} vehicles", e.edgelets, e.edgelet_vehicles);
+                    if e.focal_from_edgelets {
+                        format!("roll and focal length from {edges}")
+                    } else if e.roll_from_edgelets {
+                        format!("roll from {edges} (VP2 too far for the focal length); {rays}")
+                    } else if e.edgelets > 0 {
+                        format!("{rays}; {edges} not used (roll ±{})", deg(e.edgelet_roll_sd_deg))
+                    } else {
+                        rays.to_string()
+                    }
                 }
             );
             if let Some(c) = &r.confidence {
@@ -148,6 +162,14 @@ pub fn aggregate(
                 "vp1_from_tracks": e.vp1_from_tracks,
                 "vp1_ray_scatter_deg": e.vp1_ray_scatter_deg,
                 "track_residual_deg": e.track_residual_deg,
+                "edgelets": e.edgelets,
+                "edgelet_vehicles": e.edgelet_vehicles,
+                "roll_from_edgelets": e.roll_from_edgelets,
+                "focal_from_edgelets": e.focal_from_edgelets,
+                "edgelet_focal_px": e.edgelet_focal_px,
+                "edgelet_roll_sd_deg": e.edgelet_roll_sd_deg,
+                "edgelet_focal_log_spread": e.edgelet_focal_log_spread,
+                "edgelet_vp2_widths": e.edgelet_vp2_widths,
                 "roll_deg": r.roll.to_degrees(),
                 "ray_bias_deg": r.ray_bias.to_degrees(),
             });
@@ -209,6 +231,7 @@ pub fn run(args: Args) -> Result<()> {
     let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
     let result = aggregate(
         &vehicles,
+        &[],
         pp,
         args.image_size,
         args.method,

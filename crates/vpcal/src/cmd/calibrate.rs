@@ -21,6 +21,7 @@ use serde_json::{json, Value};
 use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
 use vpcal_formats::fs::write_atomic;
 use vpcal_formats::reference::{write_vpout, VpOutItem};
+use vpcal_geom::aggregate::edgelets::{near_ray, Edgelet, EdgeletFitOptions};
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::heatmap::VpPrediction;
@@ -28,6 +29,7 @@ use vpcal_geom::{BoxPx, Point2};
 use vpcal_net::VpNet;
 use vpcal_video::crop::{CropFilter, CropResizer};
 use vpcal_video::detect::{FileDetector, MotionConfig, MotionDetector};
+use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
 use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
 use vpcal_video::{Detector, SourceInfo, SourceOptions, Start};
 
@@ -86,6 +88,11 @@ pub struct PipelineArgs {
     /// work). Off by default: with the bundled model it did not help on the synthetic suite.
     #[arg(long)]
     pub flip_average: bool,
+    /// Do not look for edgelets (edges across the vehicles, which point at VP2) inside the
+    /// boxes: the horizon's roll and the focal length then come from the network's VP2 rays
+    /// alone.
+    #[arg(long)]
+    pub no_edgelets: bool,
     /// Process every K-th frame.
     #[arg(long, default_value_t = 1, value_name = "K")]
     pub every: u64,
@@ -157,6 +164,8 @@ pub struct VehicleRecord {
     /// VP1 and VP2 in frame pixels.
     pub vp1: Point2,
     pub vp2: Point2,
+    /// Edgelets inside the box near the network's VP2 ray (empty with `--no-edgelets`).
+    pub edgelets: Vec<Edgelet>,
 }
 
 impl VehicleRecord {
@@ -243,6 +252,9 @@ pub fn load_model(model: Option<&Path>, device: &str) -> Result<(VpNet, String)>
     }
 }
 
+/// A crop waiting for its batch: frame, score, crop box, edgelets in the box.
+type Pending = (u64, f32, BoxPx, Vec<Edgelet>);
+
 /// Run frames -> detections -> filter -> crops -> network, returning per-vehicle records.
 pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     if a.batch == 0 {
@@ -280,25 +292,37 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     let mut records: Vec<VehicleRecord> = Vec::new();
     // Crops waiting for a full batch, with (frame, score, box).
     let mut pending: Vec<f32> = Vec::with_capacity(a.batch * crop_len);
-    let mut pending_meta: Vec<(u64, f32, BoxPx)> = Vec::with_capacity(a.batch);
+    let mut pending_meta: Vec<Pending> = Vec::with_capacity(a.batch);
     let mut last_frame: Option<RgbImage> = None;
+    let edgelet_options = EdgeletOptions::default();
+    let gate = EdgeletFitOptions::default();
     let flush = |pending: &mut Vec<f32>,
-                 meta: &mut Vec<(u64, f32, BoxPx)>,
+                 meta: &mut Vec<Pending>,
                  records: &mut Vec<VehicleRecord>|
      -> Result<()> {
         if meta.is_empty() {
             return Ok(());
         }
         let preds = net.predict_prepared(pending)?;
-        for ((frame, score, crop_box), p) in meta.drain(..).zip(preds) {
+        for ((frame, score, crop_box, edgelets), p) in meta.drain(..).zip(preds) {
             let prediction = p.vp;
+            let vp2 = crop_box.frame_from_box(prediction.vp2);
+            // Only the edgelets near the network's VP2 ray are kept (memory).
+            let edgelets = near_ray(
+                crop_box.center(),
+                vp2,
+                &edgelets,
+                gate.gate_vp2_deg,
+                gate.max_per_vehicle,
+            );
             records.push(VehicleRecord {
                 frame,
                 score,
                 crop_box,
                 vp1: crop_box.frame_from_box(prediction.vp1),
-                vp2: crop_box.frame_from_box(prediction.vp2),
+                vp2,
                 prediction,
+                edgelets,
             });
         }
         pending.clear();
@@ -325,7 +349,12 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
             let batch = resizer.crop_batch(&frame.image, &boxes)?;
             for (k, (&src, &bp)) in batch.source.iter().zip(&batch.boxes).enumerate() {
                 pending.extend_from_slice(&batch.images[k * crop_len..(k + 1) * crop_len]);
-                pending_meta.push((frame.index, filtered.kept[src].score, bp));
+                let edgelets = if a.no_edgelets {
+                    Vec::new()
+                } else {
+                    edgelets_in_box(&frame.image, &bp, &edgelet_options)
+                };
+                pending_meta.push((frame.index, filtered.kept[src].score, bp, edgelets));
                 stats.crops += 1;
                 if pending_meta.len() >= a.batch {
                     flush(&mut pending, &mut pending_meta, &mut records)?;
@@ -501,8 +530,10 @@ fn settings_json(out: &PipelineOutput, a: &PipelineArgs) -> Value {
 pub fn calibrate(out: &PipelineOutput, a: &PipelineArgs) -> Result<(Calibration, Aggregated)> {
     let pp = principal_point(a, &out.info);
     let vehicles: Vec<VehicleVps> = out.records.iter().map(VehicleRecord::to_vehicle).collect();
+    let edgelets: Vec<Vec<Edgelet>> = out.records.iter().map(|r| r.edgelets.clone()).collect();
     let agg = aggregate(
         &vehicles,
+        &edgelets,
         pp,
         (out.info.width, out.info.height),
         a.method,

@@ -541,7 +541,15 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             let items = read_vpout(path)?;
             let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
             // The table shows no confidence: skip the bootstrap.
-            let agg = aggregate(&vehicles, pp, args.image_size, *method, args.min_score, 0);
+            let agg = aggregate(
+                &vehicles,
+                &[],
+                pp,
+                args.image_size,
+                *method,
+                args.min_score,
+                0,
+            );
             let (row, focal) = match agg {
                 Ok(a) => {
                     let system = SystemFile::new(SystemCalibration {

@@ -1,0 +1,272 @@
+//! The horizon's roll and the focal length from edgelets that point at VP2.
+//!
+//! Edges running across a vehicle (bumpers, window sills, the roof's front and back edges)
+//! are parallel to the road plane and perpendicular to the direction of travel, so their
+//! image lines pass through VP2. Each vehicle's edgelets (short edge pieces with a position
+//! and a direction, found by `vpcal_video::edgelets`) are gated twice: they must lie within
+//! `gate_vp2_deg` of the network's VP2 ray of that vehicle (the network tells which edges are
+//! transverse; its direction is biased by a few degrees, so the gate is wide), and not point
+//! at VP1 (`exclude_vp1_deg`). With VP1 fixed, the camera is `(f, roll)`: VP2 is the point of
+//! the horizon through VP1 at angle `roll` that is orthogonal to VP1 for `f`. The fit
+//! minimises a Cauchy loss of the angles between the edgelets and the directions from them to
+//! VP2 (a grid, then Nelder-Mead), and a bootstrap over vehicles measures its spread.
+//!
+//! Why: the bundled network's VP2 rays are right in the mean only on some scenes; its roll is
+//! pulled towards 0° (the aggregator's roll prior, and the network's own). On the synthetic
+//! suite the edgelets gave the roll to 0.2-0.7° (the network's rays: 1-3°) and, where VP2 is
+//! within a few image widths, the focal length to 1-6 %. Where VP2 is far (long lenses
+//! looking along the road) the edgelets are nearly parallel and the focal length is not
+//! identified; the bootstrap spread and the VP2 distance decide whether it is used.
+
+use super::robust::{line_angle_diff, nelder_mead, percentile, sd, SplitMix};
+use crate::point::Point2;
+
+/// A short straight piece of an image edge: position (frame pixels), direction of the edge
+/// (radians, a line angle: `a` and `a + π` are the same), and gradient strength.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Edgelet {
+    pub x: f64,
+    pub y: f64,
+    pub angle: f64,
+    pub strength: f64,
+}
+
+impl Edgelet {
+    pub fn point(&self) -> Point2 {
+        Point2::new(self.x, self.y)
+    }
+}
+
+/// Settings of the edgelet fit.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EdgeletFitOptions {
+    /// An edgelet must be within this angle of its vehicle's VP2 ray, degrees.
+    pub gate_vp2_deg: f64,
+    /// ... and farther than this from the direction to VP1, degrees.
+    pub exclude_vp1_deg: f64,
+    /// Scale of the Cauchy loss on the angles, degrees.
+    pub scale_deg: f64,
+    /// At most this many edgelets per vehicle (the strongest).
+    pub max_per_vehicle: usize,
+    /// The fit uses at most this many edgelets (evenly spaced vehicles).
+    pub max_edgelets: usize,
+    /// Fewer vehicles with edgelets than this, or fewer edgelets than `min_edgelets`: no fit.
+    pub min_vehicles: usize,
+    pub min_edgelets: usize,
+    /// Bootstrap resamples (over vehicles).
+    pub bootstrap: usize,
+    /// The roll is used when its bootstrap standard deviation is below this, degrees.
+    pub max_roll_sd_deg: f64,
+    /// The focal length is used when half of `ln(p84 / p16)` of its bootstrap is below this
+    /// ...
+    pub max_focal_log_spread: f64,
+    /// ... and VP2 lies within this many image widths of the principal point.
+    pub max_vp2_widths: f64,
+}
+
+impl Default for EdgeletFitOptions {
+    fn default() -> Self {
+        EdgeletFitOptions {
+            gate_vp2_deg: 12.0,
+            exclude_vp1_deg: 4.0,
+            scale_deg: 1.0,
+            max_per_vehicle: 48,
+            max_edgelets: 20_000,
+            min_vehicles: 20,
+            min_edgelets: 300,
+            bootstrap: 20,
+            max_roll_sd_deg: 0.5,
+            max_focal_log_spread: 0.05,
+            max_vp2_widths: 10.0,
+        }
+    }
+}
+
+/// The edgelets of one vehicle within `gate_deg` of the line from `centre` towards `vp2`
+/// (none when `vp2` is not finite), strongest first, at most `max`.
+pub fn near_ray(
+    centre: Point2,
+    vp2: Point2,
+    edgelets: &[Edgelet],
+    gate_deg: f64,
+    max: usize,
+) -> Vec<Edgelet> {
+    if !vp2.is_finite() || vp2 == centre {
+        return Vec::new();
+    }
+    let a2 = (vp2.y - centre.y).atan2(vp2.x - centre.x);
+    let gate = gate_deg.to_radians();
+    let mut kept: Vec<Edgelet> = edgelets
+        .iter()
+        .filter(|e| line_angle_diff(e.angle - a2).abs() < gate)
+        .copied()
+        .collect();
+    kept.sort_by(|a, b| b.strength.total_cmp(&a.strength));
+    kept.truncate(max);
+    kept
+}
+
+/// What the edgelets say.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeletFit {
+    pub focal_px: f64,
+    /// Horizon roll, radians (the angle of the horizon's direction from VP1 towards VP2).
+    pub roll: f64,
+    pub vp2: Point2,
+    /// Edgelets and vehicles the fit used.
+    pub edgelets: usize,
+    pub vehicles: usize,
+    /// Bootstrap spread.
+    pub roll_sd_deg: f64,
+    pub focal_px_p16: f64,
+    pub focal_px_p84: f64,
+    /// Whether the roll and the focal length pass the identifiability gates.
+    pub roll_usable: bool,
+    pub focal_usable: bool,
+}
+
+impl EdgeletFit {
+    /// Half of `ln(p84 / p16)` of the bootstrap focal lengths (about the standard deviation
+    /// of `ln f`).
+    pub fn focal_log_spread(&self) -> f64 {
+        0.5 * (self.focal_px_p84 / self.focal_px_p16).ln()
+    }
+}
+
+/// VP2 for (ln f, roll) with VP1 and pp fixed, as `VP2 = VP1 + h / u`.
+pub(super) fn vp2_direction(vp1: Point2, pp: Point2, ln_f: f64, roll: f64) -> (Point2, f64) {
+    let h = Point2::new(roll.cos(), roll.sin());
+    let v = vp1 - pp;
+    let f = ln_f.exp();
+    (h, -v.dot(h) / (f * f + v.dot(v)))
+}
+
+/// Edgelets of the vehicles that the fit uses, flattened, with each one's vehicle index.
+struct Flat {
+    point: Vec<Point2>,
+    angle: Vec<f64>,
+    group: Vec<usize>,
+    groups: usize,
+}
+
+fn cost(flat: &Flat, gw: &[f64], vp1: Point2, pp: Point2, x: &[f64], s: f64) -> f64 {
+    let (h, u) = vp2_direction(vp1, pp, x[0], x[1]);
+    let mut c = 0.0;
+    for ((p, a), g) in flat.point.iter().zip(&flat.angle).zip(&flat.group) {
+        let w = gw[*g];
+        if w == 0.0 {
+            continue;
+        }
+        let d = (vp1 - *p) * u + h;
+        let r = line_angle_diff(a - d.y.atan2(d.x)) / s;
+        c += w * (1.0 + r * r).ln();
+    }
+    c
+}
+
+/// Fit `(f, roll)` to the vehicles' edgelets (already gated by their VP2 rays) with VP1
+/// fixed; `roll0` (radians) centres the roll grid and `width` scales the focal grid.
+/// `None` when there are too few vehicles or edgelets after removing those that point at VP1.
+pub fn fit(
+    vp1: Point2,
+    pp: Point2,
+    width: f64,
+    vehicles: &[Vec<Edgelet>],
+    roll0: f64,
+    opts: &EdgeletFitOptions,
+    seed: u64,
+) -> Option<EdgeletFit> {
+    let ex1 = opts.exclude_vp1_deg.to_radians();
+    let kept: Vec<Vec<(Point2, f64)>> = vehicles
+        .iter()
+        .map(|v| {
+            v.iter()
+                .filter(|e| {
+                    let d = vp1 - e.point();
+                    line_angle_diff(e.angle - d.y.atan2(d.x)).abs() > ex1
+                })
+                .map(|e| (e.point(), e.angle))
+                .collect::<Vec<_>>()
+        })
+        .filter(|v: &Vec<_>| !v.is_empty())
+        .collect();
+    let total: usize = kept.iter().map(Vec::len).sum();
+    if kept.len() < opts.min_vehicles || total < opts.min_edgelets || !vp1.is_finite() {
+        return None;
+    }
+    // Evenly spaced vehicles, so that the fit's cost stays bounded.
+    let step = (total as f64 / opts.max_edgelets as f64).max(1.0);
+    let mut flat = Flat {
+        point: vec![],
+        angle: vec![],
+        group: vec![],
+        groups: 0,
+    };
+    let mut next = 0.0;
+    for (i, v) in kept.iter().enumerate() {
+        if (i as f64) < next {
+            continue;
+        }
+        next += step;
+        for (p, a) in v {
+            flat.point.push(*p);
+            flat.angle.push(*a);
+            flat.group.push(flat.groups);
+        }
+        flat.groups += 1;
+    }
+    let s = opts.scale_deg.to_radians();
+    let ones = vec![1.0; flat.groups];
+    let (lo, hi) = ((0.25 * width).ln(), (20.0 * width).ln());
+    let mut best = (f64::INFINITY, [0.0, 0.0]);
+    for i in 0..32 {
+        let ln_f = lo + (hi - lo) * f64::from(i) / 31.0;
+        for j in -20..=20 {
+            let x = [ln_f, roll0 + f64::from(j) * 0.5f64.to_radians()];
+            let c = cost(&flat, &ones, vp1, pp, &x, s);
+            if c < best.0 {
+                best = (c, x);
+            }
+        }
+    }
+    let step0 = [0.05, 0.2f64.to_radians()];
+    let x = nelder_mead(|x| cost(&flat, &ones, vp1, pp, x, s), &best.1, &step0, 300);
+    let mut rng = SplitMix(seed ^ 0xED6E_1E75);
+    let (mut fs, mut rolls) = (vec![], vec![]);
+    for _ in 0..opts.bootstrap {
+        let w: Vec<f64> = (0..flat.groups).map(|_| rng.poisson1()).collect();
+        let xb = nelder_mead(|x| cost(&flat, &w, vp1, pp, x, s), &x, &step0, 150);
+        fs.push(xb[0].exp());
+        rolls.push(line_angle_diff(xb[1] - x[1]).to_degrees());
+    }
+    let (h, u) = vp2_direction(vp1, pp, x[0], x[1]);
+    let vp2 = vp1 + h / u;
+    let focal_px = x[0].exp();
+    let (p16, p84) = if fs.is_empty() {
+        (f64::NAN, f64::NAN)
+    } else {
+        (percentile(fs.clone(), 16.0), percentile(fs, 84.0))
+    };
+    let roll_sd_deg = if rolls.is_empty() {
+        f64::NAN
+    } else {
+        sd(&rolls)
+    };
+    let roll_usable = roll_sd_deg <= opts.max_roll_sd_deg;
+    let focal_usable = roll_usable
+        && 0.5 * (p84 / p16).ln() <= opts.max_focal_log_spread
+        && vp2.is_finite()
+        && (vp2 - pp).norm() <= opts.max_vp2_widths * width;
+    Some(EdgeletFit {
+        focal_px,
+        roll: x[1],
+        vp2,
+        edgelets: flat.point.len(),
+        vehicles: flat.groups,
+        roll_sd_deg,
+        focal_px_p16: p16,
+        focal_px_p84: p84,
+        roll_usable,
+        focal_usable,
+    })
+}
