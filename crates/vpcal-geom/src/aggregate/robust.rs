@@ -43,10 +43,14 @@
 //!    in the biased regime it is Cauchy (its unbounded tail lets systematically deviating
 //!    rays still pull, which measured better on the real CNN outputs: 8.8 / 22 / 9.1 % vs
 //!    9.3 / 21 / 9.0 % pooled for the three public CNNs).
-//! 5. **Confidence**: a bootstrap over vehicles (re-weighting with Poisson(1) counts) re-fits
+//! 5. **Edgelets** ([`aggregate_with_edgelets`], [`super::edgelets`]): with the edges across
+//!    the vehicles that point at VP2, (f, roll) is fitted again with VP1 fixed; the roll
+//!    replaces the one above when its bootstrap spread is small, and the focal length too when
+//!    it is identified (VP2 within `max_vp2_widths` image widths, small spread).
+//! 6. **Confidence**: a bootstrap over vehicles (re-weighting with Poisson(1) counts) re-fits
 //!    VP1 and (f, θ, δ); the 16th-84th percentiles of `f` and the spread of the horizon angle
 //!    are reported, with the focal length the data alone prefers (no focal prior).
-//! 6. **Vehicles stand below the horizon.** An estimate whose horizon has more than
+//! 7. **Vehicles stand below the horizon.** An estimate whose horizon has more than
 //!    `max_above_horizon` (half) of the vehicle weight's box centres above it is impossible,
 //!    and is reported as not enough evidence instead of returned. On the synthetic suite the
 //!    outright failures had 98-100 % above (one had 11 %), every other result none
