@@ -69,23 +69,20 @@ fn kernel(sigma: f32, order: u8) -> Vec<f32> {
 
 /// Correlate each row (`horizontal`) or column with `k`, borders replicated.
 fn convolve(src: &[f32], w: usize, h: usize, k: &[f32], horizontal: bool) -> Vec<f32> {
-    let r = (k.len() / 2) as isize;
+    let r = k.len() / 2;
     let mut out = vec![0.0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let mut acc = 0.0;
-            for (j, kv) in k.iter().enumerate() {
-                let o = j as isize - r;
-                let v = if horizontal {
-                    let xx = (x as isize + o).clamp(0, w as isize - 1) as usize;
-                    src[y * w + xx]
-                } else {
-                    let yy = (y as isize + o).clamp(0, h as isize - 1) as usize;
-                    src[yy * w + x]
-                };
-                acc += kv * v;
-            }
-            out[y * w + x] = acc;
+    // One line (a row, or a column) at a time, padded by replication, so that the inner loop
+    // has no bounds logic.
+    let (lines, len) = if horizontal { (h, w) } else { (w, h) };
+    let mut padded = vec![0.0f32; len + 2 * r];
+    for l in 0..lines {
+        let at = |i: usize| if horizontal { l * w + i } else { i * w + l };
+        for (i, p) in padded.iter_mut().enumerate() {
+            *p = src[at(i.saturating_sub(r).min(len - 1))];
+        }
+        for i in 0..len {
+            let window = &padded[i..i + k.len()];
+            out[at(i)] = window.iter().zip(k).map(|(a, b)| a * b).sum();
         }
     }
     out
