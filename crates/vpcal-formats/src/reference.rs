@@ -9,12 +9,17 @@
 //! Numbers may be `Infinity` or `NaN`. Note that the reference's `vp2_var` is not VP2's spread
 //! (it indexes VP1's column); [`VpOutItem::vp2_spread`] reads the right one from `pred_vars`.
 //!
+//! vpcal adds `"edgelets": [[x, y, angle, strength], ...]` (frame pixels, radians) to the items
+//! it writes when it found edgelets in the box (`vpcal calibrate --vehicles`), so that
+//! `vpcal aggregate` on that file sees what `calibrate` saw; other readers ignore the field.
+//!
 //! `detections.json`: `[{"frame_cnt", "boxes": [[ymin, xmin, ymax, xmax] normalised], "scores"}]`.
 
 use crate::error::FormatError;
 use crate::fs::{read_json, write_json};
 use crate::json::{AccessError, Json};
 use std::path::Path;
+use vpcal_geom::aggregate::edgelets::Edgelet;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::{BoxPx, Point2};
 
@@ -49,6 +54,8 @@ pub struct VpOutItem {
     pub vp1_var: Option<f64>,
     /// The reference's `vp2_var` (see the module docs).
     pub vp2_var: Option<f64>,
+    /// vpcal's edgelets in the box, `[x, y, angle, strength]` (empty when absent).
+    pub edgelets: Vec<[f64; 4]>,
 }
 
 impl VpOutItem {
@@ -83,6 +90,19 @@ impl VpOutItem {
         self.selected_spread(1)
     }
 
+    /// The item's edgelets.
+    pub fn edgelets(&self) -> Vec<Edgelet> {
+        self.edgelets
+            .iter()
+            .map(|&[x, y, angle, strength]| Edgelet {
+                x,
+                y,
+                angle,
+                strength,
+            })
+            .collect()
+    }
+
     /// The item as aggregation evidence.
     pub fn to_vehicle(&self) -> VehicleVps {
         VehicleVps {
@@ -113,6 +133,11 @@ impl VpOutItem {
             .enumerate()
             .map(|(i, r)| r.as_f64_array::<4>(&format!("{}[{i}]", path("pred_vps"))))
             .collect::<Result<_, _>>()?;
+        let edgelets = rows("edgelets")?
+            .iter()
+            .enumerate()
+            .map(|(i, r)| r.as_f64_array::<4>(&format!("{}[{i}]", path("edgelets"))))
+            .collect::<Result<_, _>>()?;
         let pred_vars = rows("pred_vars")?
             .iter()
             .enumerate()
@@ -141,6 +166,7 @@ impl VpOutItem {
             vp2_var: opt("vp2_var")
                 .map(|v| v.as_f64(&path("vp2_var")))
                 .transpose()?,
+            edgelets,
         })
     }
 
@@ -188,6 +214,12 @@ impl VpOutItem {
         }
         put("vp1", self.vp1.into());
         put("vp2", self.vp2.into());
+        if !self.edgelets.is_empty() {
+            put(
+                "edgelets",
+                Json::Array(self.edgelets.iter().map(|r| Json::from(&r[..])).collect()),
+            );
+        }
         Json::Object(m)
     }
 }

@@ -37,16 +37,16 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
         "--bcs-json",
         &o("system.json"),
         "--max-frames",
-        "120",
+        "200",
         "--quiet",
     ]);
     let code = r.status.code().unwrap();
     assert!(code == 0 || code == 3, "exit {code}: {}", text(&r));
-    assert!(text(&r).contains("120 processed (320x240)"), "{}", text(&r));
+    assert!(text(&r).contains("200 processed (320x240)"), "{}", text(&r));
     let calib = read_json(&out.path().join("calib.json"));
     assert_eq!(calib["format"], "vpcal-calibration/1");
     assert_eq!(calib["image_size"], serde_json::json!([320, 240]));
-    assert_eq!(calib["input"]["frames_processed"], 120);
+    assert_eq!(calib["input"]["frames_processed"], 200);
     // Every kept box became one vehicle record (VPout JSON, with Infinity/NaN tokens).
     let vehicles = vpcal_formats::reference::read_vpout(&out.path().join("vehicles.json")).unwrap();
     assert_eq!(
@@ -62,6 +62,40 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
         assert_eq!((img.width(), img.height()), (320, 240));
         let sys = read_json(&out.path().join("system.json"));
         assert_eq!(sys["camera_calibration"]["vp1"], calib["vp1"]);
+        // The vehicles file carries the edgelets, so `aggregate` on it finds the same camera
+        // (boxes go through centre and half size in the file: equal up to rounding).
+        assert!(
+            vehicles.iter().any(|v| !v.edgelets.is_empty()),
+            "no edgelets written"
+        );
+        // (On these 200 frames the edgelet fit runs: 1,996 edgelets with the bundled model.)
+        assert!(
+            calib["evidence"]["edgelets"].as_u64().unwrap() > 0,
+            "{}",
+            calib["evidence"]
+        );
+        let pp = &calib["pp"];
+        let r = vpcal(&[
+            "aggregate",
+            &o("vehicles.json"),
+            "--pp",
+            &format!("{},{}", pp[0], pp[1]),
+            "--image-size",
+            "320x240",
+            "-o",
+            &o("system_again.json"),
+        ]);
+        assert!(r.status.success(), "{}", text(&r));
+        let again = read_json(&out.path().join("system_again.json"));
+        for vp in ["vp1", "vp2"] {
+            for k in 0..2 {
+                let (a, b) = (
+                    again["camera_calibration"][vp][k].as_f64().unwrap(),
+                    calib[vp][k].as_f64().unwrap(),
+                );
+                assert!((a - b).abs() <= 1e-6 * b.abs().max(1.0), "{vp}: {a} vs {b}");
+            }
+        }
     } else {
         assert_eq!(calib["status"], "not_enough_evidence");
         assert!(!out.path().join("system.json").exists());

@@ -4,7 +4,7 @@ use super::args;
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
-use vpcal_formats::reference::read_vpout;
+use vpcal_formats::reference::{read_vpout, VpOutItem};
 use vpcal_geom::aggregate::edgelets::Edgelet;
 use vpcal_geom::aggregate::reference::{self, ReferenceOptions};
 use vpcal_geom::aggregate::robust::{self, RobustOptions};
@@ -48,6 +48,14 @@ pub struct Aggregated {
     pub confidence: serde_json::Value,
     /// The straight vehicle tracks the robust method found (empty for the other methods).
     pub track_lines: Vec<TrackLine>,
+}
+
+/// The items' edgelets, one list per item; empty when no item has any (files of other tools).
+pub fn edgelets_of(items: &[VpOutItem]) -> Vec<Vec<Edgelet>> {
+    if items.iter().all(|i| i.edgelets.is_empty()) {
+        return Vec::new();
+    }
+    items.iter().map(VpOutItem::edgelets).collect()
 }
 
 /// An optional angle for a summary line.
@@ -231,7 +239,7 @@ pub fn run(args: Args) -> Result<()> {
     let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
     let result = aggregate(
         &vehicles,
-        &[],
+        &edgelets_of(&items),
         pp,
         args.image_size,
         args.method,

@@ -205,6 +205,11 @@ impl VehicleRecord {
             pred_vars: p.spreads.clone(),
             vp1_var: Some(p.vp1_spread()),
             vp2_var: Some(p.vp2_spread()),
+            edgelets: self
+                .edgelets
+                .iter()
+                .map(|e| [e.x, e.y, e.angle, e.strength])
+                .collect(),
         }
     }
 }

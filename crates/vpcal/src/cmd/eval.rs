@@ -6,7 +6,7 @@
 //! with the optimal per-session scale (BrnoCarPark). Pooled rows concatenate all pairs, as the
 //! paper does.
 
-use super::aggregate::{aggregate, Method};
+use super::aggregate::{aggregate, edgelets_of, Method};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -543,7 +543,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             // The table shows no confidence: skip the bootstrap.
             let agg = aggregate(
                 &vehicles,
-                &[],
+                &edgelets_of(&items),
                 pp,
                 args.image_size,
                 *method,
