@@ -403,8 +403,8 @@ fn vehicle_tracks_replace_scattered_biased_vp1_rays() {
     assert!(exact.evidence.vp1_from_tracks, "{:?}", exact.evidence);
 }
 
-/// Per vehicle: 20 edgelets inside its box pointing at the true VP2 (0.5° noise), 10 along
-/// the direction to VP1 (the vehicle's length; to be excluded) and 4 at random angles.
+/// Per vehicle: 20 edgelets inside its box pointing at the true VP2 (0.5° noise), 10 at the
+/// true VP1 (the vehicle's length; 0.5° noise) and 4 at random angles.
 fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Edgelet>> {
     let mut rng = Lcg(seed);
     let vp1 = scene.vp([0.0, 1.0, 0.0]);
@@ -422,7 +422,7 @@ fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Ed
                     let to = |q: Point2| (q.y - p.y).atan2(q.x - p.x);
                     let angle = match k {
                         0..20 => to(vp2) + 0.5f64.to_radians() * rng.normal(),
-                        20..30 => to(vp1),
+                        20..30 => to(vp1) + 0.5f64.to_radians() * rng.normal(),
                         _ => std::f64::consts::PI * rng.next(),
                     };
                     Edgelet {
@@ -492,4 +492,37 @@ fn edgelets_give_the_roll_and_a_near_vp2s_focal_length() {
     assert!(ev.edgelet_vp2_widths.unwrap() > 10.0, "{ev:?}");
     let e = horizon_error(&far, &r.calibration);
     assert!(e < 0.2, "horizon off by {e}°");
+}
+
+#[test]
+fn without_tracks_edgelets_along_the_vehicles_place_vp1() {
+    let opts = RobustOptions {
+        image_size: Some([1920.0, 1080.0]),
+        bootstrap: 0,
+        ..RobustOptions::default()
+    };
+    let scene = Scene::new(1400.0, 0.35, 1f64.to_radians(), 0.35, 8.0);
+    let truth = scene.vp([0.0, 1.0, 0.0]);
+    // One box per vehicle (no tracks), and a network whose VP1 rays are all turned by 4°.
+    let mut vehicles = cloud(&scene, 300, 0.2, 21);
+    for v in &mut vehicles {
+        let c = v.box_px.unwrap().center();
+        v.vp1 = fake_vp(c, v.vp1, 4.0, 1.0);
+    }
+    let vp1_error = |v: Point2| (v - truth).norm() / (truth - scene.pp).norm();
+    let without = aggregate(&vehicles, scene.pp, &opts).unwrap();
+    assert!(!without.evidence.vp1_from_tracks);
+    let e0 = vp1_error(without.calibration.vp1);
+    let edges = edgelets_for(&scene, &vehicles, 22);
+    let with = aggregate_with_edgelets(&vehicles, &edges, scene.pp, &opts).unwrap();
+    let ev = with.evidence;
+    assert!(ev.vp1_from_edgelets && ev.vp1_edgelets > 1000, "{ev:?}");
+    let e1 = vp1_error(with.calibration.vp1);
+    assert!(e1 < 0.01, "VP1 {e1} of its distance off with edgelets");
+    assert!(e0 > 0.03, "VP1 only {e0} off from the turned rays");
+    // With tracks, VP1 stays with the tracks.
+    let tracked = traffic(&scene, 6.0, 6.0, 0.0, 3);
+    let edges = edgelets_for(&scene, &tracked, 23);
+    let r = aggregate_with_edgelets(&tracked, &edges, scene.pp, &opts).unwrap();
+    assert!(r.evidence.vp1_from_tracks && !r.evidence.vp1_from_edgelets);
 }

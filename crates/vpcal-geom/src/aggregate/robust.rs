@@ -197,6 +197,10 @@ pub struct Evidence {
     /// Edgelets (and vehicles with edgelets) the edgelet fit used; 0 without one.
     pub edgelets: usize,
     pub edgelet_vehicles: usize,
+    /// Whether VP1 came from the edgelets along the vehicles (only without tracks), and how
+    /// many edgelets that fit used.
+    pub vp1_from_edgelets: bool,
+    pub vp1_edgelets: usize,
     /// Whether the horizon's roll, and the focal length, came from the edgelets.
     pub roll_from_edgelets: bool,
     pub focal_from_edgelets: bool,
@@ -1184,6 +1188,25 @@ pub fn aggregate_with_edgelets(
     };
     let (vp1, x, rays_trusted) =
         fit_camera(&model, &vp1_lines, &vp1_lines.weight, &prep.weight, None);
+    // Without tracks, the edgelets along the vehicles place VP1 better than the network's
+    // VP1 rays (module docs of `edgelets`).
+    let edge_vp1 = opts
+        .edgelets
+        .as_ref()
+        .filter(|_| !vp1_lines.from_tracks && !edgelets.is_empty())
+        .and_then(|eo| {
+            let vehicles: Vec<(Point2, Point2, Point2, &[Edgelet])> = pairs
+                .iter()
+                .zip(edgelets)
+                .filter(|(p, e)| p.score > opts.min_score && !e.is_empty())
+                .filter_map(|(p, e)| {
+                    let c = p.box_px.filter(BoxPx::is_valid)?.center();
+                    Some((c, p.vp1, p.vp2, e.as_slice()))
+                })
+                .collect();
+            edge::fit_vp1(vp1, &vehicles, eo)
+        });
+    let vp1 = edge_vp1.map_or(vp1, |e| e.0);
     let model = Vp2Model { vp1, ..model };
     let edge_fit = opts
         .edgelets
@@ -1247,6 +1270,8 @@ pub fn aggregate_with_edgelets(
         vp1_from_tracks: vp1_lines.from_tracks,
         vp1_ray_scatter_deg: network_scatter,
         track_residual_deg: track_residual,
+        vp1_from_edgelets: edge_vp1.is_some(),
+        vp1_edgelets: edge_vp1.map_or(0, |e| e.1),
         edgelets: edge_fit.map_or(0, |e| e.edgelets),
         edgelet_vehicles: edge_fit.map_or(0, |e| e.vehicles),
         roll_from_edgelets: usable.is_some(),

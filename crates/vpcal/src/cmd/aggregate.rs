@@ -123,6 +123,13 @@ pub fn aggregate(
                         deg(e.track_residual_deg),
                         deg(e.vp1_ray_scatter_deg)
                     )
+                } else if e.vp1_from_edgelets {
+                    format!(
+                        "VP1 from {} edgelets along the vehicles; the network's rays {}, {} straight vehicle tracks",
+                        e.vp1_edgelets,
+                        deg(e.vp1_ray_scatter_deg),
+                        e.track_lines
+                    )
                 } else {
                     format!(
                         "VP1 from the network's rays, median angle {}; {} straight vehicle tracks, {}",
@@ -170,6 +177,8 @@ pub fn aggregate(
                 "vp1_from_tracks": e.vp1_from_tracks,
                 "vp1_ray_scatter_deg": e.vp1_ray_scatter_deg,
                 "track_residual_deg": e.track_residual_deg,
+                "vp1_from_edgelets": e.vp1_from_edgelets,
+                "vp1_edgelets": e.vp1_edgelets,
                 "edgelets": e.edgelets,
                 "edgelet_vehicles": e.edgelet_vehicles,
                 "roll_from_edgelets": e.roll_from_edgelets,

@@ -21,7 +21,7 @@ use serde_json::{json, Value};
 use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
 use vpcal_formats::fs::write_atomic;
 use vpcal_formats::reference::{write_vpout, VpOutItem};
-use vpcal_geom::aggregate::edgelets::{near_ray, Edgelet, EdgeletFitOptions};
+use vpcal_geom::aggregate::edgelets::{near_rays, Edgelet, EdgeletFitOptions};
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::heatmap::VpPrediction;
@@ -164,7 +164,7 @@ pub struct VehicleRecord {
     /// VP1 and VP2 in frame pixels.
     pub vp1: Point2,
     pub vp2: Point2,
-    /// Edgelets inside the box near the network's VP2 ray (empty with `--no-edgelets`).
+    /// Edgelets inside the box near the network's VP rays (empty with `--no-edgelets`).
     pub edgelets: Vec<Edgelet>,
 }
 
@@ -312,9 +312,10 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
         for ((frame, score, crop_box, edgelets), p) in meta.drain(..).zip(preds) {
             let prediction = p.vp;
             let vp2 = crop_box.frame_from_box(prediction.vp2);
-            // Only the edgelets near the network's VP2 ray are kept (memory).
-            let edgelets = near_ray(
+            // Only the edgelets near the network's VP rays are kept (memory).
+            let edgelets = near_rays(
                 crop_box.center(),
+                crop_box.frame_from_box(prediction.vp1),
                 vp2,
                 &edgelets,
                 gate.gate_vp2_deg,
