@@ -1,4 +1,5 @@
-//! The horizon's roll and the focal length from edgelets that point at VP2.
+//! The horizon's roll and the focal length from edgelets that point at VP2 (and VP1 from those
+//! that point at VP1).
 //!
 //! Edges running across a vehicle (bumpers, window sills, the roof's front and back edges)
 //! are parallel to the road plane and perpendicular to the direction of travel, so their
@@ -13,10 +14,14 @@
 //!
 //! Why: the bundled network's VP2 rays are right in the mean only on some scenes; its roll is
 //! pulled towards 0° (the aggregator's roll prior, and the network's own). On the synthetic
-//! suite the edgelets gave the roll to 0.2-0.7° (the network's rays: 1-3°) and, where VP2 is
-//! within a few image widths, the focal length to 1-6 %. Where VP2 is far (long lenses
-//! looking along the road) the edgelets are nearly parallel and the focal length is not
-//! identified; the bootstrap spread and the VP2 distance decide whether it is used.
+//! suite's straight roads and intersection the edgelets gave the roll to 0.14-0.75° (the
+//! network's rays: 0.1-3.2°) and, where VP2 is within 10 image widths, the focal length to
+//! 0-11 %. Where VP2 is far (long lenses looking along the road: 20-40 widths) the edgelets
+//! are nearly parallel and the focal length is not identified (it came out 25-95 % too long);
+//! the bootstrap spread and the VP2 distance decide whether it is used.
+//!
+//! [`fit_vp1`] does the same for VP1 with the edges *along* the vehicles, for inputs where no
+//! vehicle tracks give VP1.
 
 use super::robust::{line_angle_diff, nelder_mead, percentile, sd, SplitMix};
 use crate::point::Point2;

@@ -43,7 +43,8 @@
 //!    in the biased regime it is Cauchy (its unbounded tail lets systematically deviating
 //!    rays still pull, which measured better on the real CNN outputs: 8.8 / 22 / 9.1 % vs
 //!    9.3 / 21 / 9.0 % pooled for the three public CNNs).
-//! 5. **Edgelets** ([`aggregate_with_edgelets`], [`super::edgelets`]): with the edges across
+//! 5. **Edgelets** ([`aggregate_with_edgelets`], [`super::edgelets`]): without tracks, VP1
+//!    is re-fitted to the edges along the vehicles (they point at VP1). With the edges across
 //!    the vehicles that point at VP2, (f, roll) is fitted again with VP1 fixed; the roll
 //!    replaces the one above when its bootstrap spread is small, and the focal length too when
 //!    it is identified (VP2 within `max_vp2_widths` image widths, small spread).
