@@ -4,7 +4,7 @@
 //! outliers.
 
 use proptest::prelude::*;
-use vpcal_geom::aggregate::edgelets::Edgelet;
+use vpcal_geom::aggregate::edgelets::{near_rays, Edgelet};
 use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
@@ -525,4 +525,38 @@ fn without_tracks_edgelets_along_the_vehicles_place_vp1() {
     let edges = edgelets_for(&scene, &tracked, 23);
     let r = aggregate_with_edgelets(&tracked, &edges, scene.pp, &opts).unwrap();
     assert!(r.evidence.vp1_from_tracks && !r.evidence.vp1_from_edgelets);
+}
+
+proptest! {
+    /// What a box keeps: a subset of its edgelets without repeats, at most `max` per ray,
+    /// each within the gate of the VP1 or the VP2 ray, and all the strongest near the VP2 ray.
+    #[test]
+    fn near_rays_keeps_a_gated_subset(
+        raw in proptest::collection::vec((0.0f64..100.0, 0.0f64..100.0, -4.0f64..4.0, 1.0f64..99.0), 0..80),
+        vp1 in (-3000.0f64..3000.0, -3000.0f64..-100.0),
+        vp2 in (-9000.0f64..9000.0, -3000.0f64..3000.0),
+        max in 1usize..30,
+    ) {
+        let edgelets: Vec<Edgelet> = raw
+            .iter()
+            .map(|&(x, y, angle, strength)| Edgelet { x, y, angle, strength })
+            .collect();
+        let c = Point2::new(50.0, 50.0);
+        let (v1, v2) = (Point2::new(vp1.0, vp1.1), Point2::new(vp2.0, vp2.1));
+        let kept = near_rays(c, v1, v2, &edgelets, 12.0, max);
+        let diff = |e: &Edgelet, v: Point2| {
+            let a = (v.y - c.y).atan2(v.x - c.x);
+            let d = (e.angle - a).rem_euclid(std::f64::consts::PI);
+            d.min(std::f64::consts::PI - d).to_degrees()
+        };
+        prop_assert!(kept.len() <= 2 * max);
+        for (i, e) in kept.iter().enumerate() {
+            prop_assert!(edgelets.contains(e));
+            prop_assert!(!kept[..i].contains(e));
+            prop_assert!(diff(e, v1) < 12.0 + 1e-9 || diff(e, v2) < 12.0 + 1e-9);
+        }
+        let near2 = edgelets.iter().filter(|e| diff(e, v2) < 12.0 - 1e-9).count();
+        let kept2 = kept.iter().filter(|e| diff(e, v2) < 12.0 + 1e-9).count();
+        prop_assert!(kept2 >= near2.min(max));
+    }
 }
