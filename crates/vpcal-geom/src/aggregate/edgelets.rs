@@ -132,6 +132,16 @@ pub fn near_rays(
     kept
 }
 
+/// One vehicle's evidence for the edgelet fits: its box centre, where the network's VP1 and
+/// VP2 rays from the centre point, and the edgelets found in its box.
+#[derive(Debug, Clone, Copy)]
+pub struct BoxEdgelets<'a> {
+    pub centre: Point2,
+    pub vp1: Point2,
+    pub vp2: Point2,
+    pub edgelets: &'a [Edgelet],
+}
+
 /// What the edgelets say.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EdgeletFit {
@@ -190,14 +200,14 @@ fn cost(flat: &Flat, gw: &[f64], vp1: Point2, pp: Point2, x: &[f64], s: f64) -> 
     c
 }
 
-/// Fit `(f, roll)` to the vehicles' edgelets (already gated by their VP2 rays) with VP1
-/// fixed; `roll0` (radians) centres the roll grid and `width` scales the focal grid.
-/// `None` when there are too few vehicles or edgelets after removing those that point at VP1.
+/// Fit `(f, roll)` to the vehicles' edgelets near their VP2 rays with VP1 fixed; `roll0`
+/// (radians) centres the roll grid and `width` scales the focal grid. `None` when there are
+/// too few vehicles or edgelets after removing those that point at VP1.
 pub fn fit(
     vp1: Point2,
     pp: Point2,
     width: f64,
-    vehicles: &[Vec<Edgelet>],
+    vehicles: &[BoxEdgelets],
     roll0: f64,
     opts: &EdgeletFitOptions,
     seed: u64,
@@ -206,13 +216,20 @@ pub fn fit(
     let kept: Vec<Vec<(Point2, f64)>> = vehicles
         .iter()
         .map(|v| {
-            v.iter()
-                .filter(|e| {
-                    let d = vp1 - e.point();
-                    line_angle_diff(e.angle - d.y.atan2(d.x)).abs() > ex1
-                })
-                .map(|e| (e.point(), e.angle))
-                .collect::<Vec<_>>()
+            near_ray(
+                v.centre,
+                v.vp2,
+                v.edgelets,
+                opts.gate_vp2_deg,
+                opts.max_per_vehicle,
+            )
+            .into_iter()
+            .filter(|e| {
+                let d = vp1 - e.point();
+                line_angle_diff(e.angle - d.y.atan2(d.x)).abs() > ex1
+            })
+            .map(|e| (e.point(), e.angle))
+            .collect::<Vec<_>>()
         })
         .filter(|v: &Vec<_>| !v.is_empty())
         .collect();
@@ -297,10 +314,9 @@ pub fn fit(
     })
 }
 
-/// VP1 from the edgelets along the vehicles: each vehicle's edgelets within `gate_deg` of its
-/// network VP1 ray (from `centre` towards `vp1`) and farther than `exclude_vp1_deg` from its
-/// VP2 ray (the pairs' order: `(centre, vp1 ray target, vp2 ray target, edgelets)`), fitted
-/// as the point their lines meet (Cauchy loss on the angles, Nelder-Mead from `start`).
+/// VP1 from the edgelets along the vehicles: each vehicle's edgelets within `gate_vp2_deg` of
+/// its network VP1 ray and farther than `exclude_vp1_deg` from its VP2 ray (the same two
+/// angles as for VP2, with the rays' roles swapped), fitted as the point their lines meet (Cauchy loss on the angles, Nelder-Mead from `start`).
 /// Returns VP1 and the edgelets and vehicles used; `None` with too few of them.
 ///
 /// Used when no vehicle tracks give VP1: on the synthetic suite the network's VP1 rays then
@@ -308,7 +324,7 @@ pub fn fit(
 /// (the seventh, a curve, 7° vs 15°).
 pub fn fit_vp1(
     start: Point2,
-    vehicles: &[(Point2, Point2, Point2, &[Edgelet])],
+    vehicles: &[BoxEdgelets],
     opts: &EdgeletFitOptions,
 ) -> Option<(Point2, usize, usize)> {
     let gate = opts.gate_vp2_deg;
@@ -316,12 +332,18 @@ pub fn fit_vp1(
     let mut point = vec![];
     let mut angle = vec![];
     let mut used = 0;
-    for (centre, vp1, vp2, edgelets) in vehicles {
+    for &BoxEdgelets {
+        centre,
+        vp1,
+        vp2,
+        edgelets,
+    } in vehicles
+    {
         if !vp2.is_finite() || vp2 == centre {
             continue;
         }
         let a2 = (vp2.y - centre.y).atan2(vp2.x - centre.x);
-        let kept: Vec<Edgelet> = near_ray(*centre, *vp1, edgelets, gate, opts.max_per_vehicle)
+        let kept: Vec<Edgelet> = near_ray(centre, vp1, edgelets, gate, opts.max_per_vehicle)
             .into_iter()
             .filter(|e| line_angle_diff(e.angle - a2).abs() > ex)
             .collect();

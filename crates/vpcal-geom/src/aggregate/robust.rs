@@ -61,7 +61,7 @@
 //! On the 12 BrnoCompSpeed training videos this is measured against the reference rule by
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
-use super::edgelets::{self as edge, Edgelet, EdgeletFitOptions};
+use super::edgelets::{self as edge, BoxEdgelets, Edgelet, EdgeletFitOptions};
 use super::tracks::{self, TrackLine, TrackOptions};
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
@@ -744,11 +744,7 @@ struct Vp2Model<'a> {
 impl Vp2Model<'_> {
     /// VP2 as a direction from VP1: `VP2 = VP1 + h / u`, returning `(h, u)`.
     fn vp2(&self, ln_f: f64, roll: f64) -> (Point2, f64) {
-        let h = Point2::new(roll.cos(), roll.sin());
-        let v = self.vp1 - self.pp;
-        let f = ln_f.exp();
-        let u = -v.dot(h) / (f * f + v.dot(v));
-        (h, u)
+        edge::vp2_direction(self.vp1, self.pp, ln_f, roll)
     }
 
     fn cost(&self, x: &[f64], w: &[f64], with_focal_prior: bool) -> f64 {
@@ -1189,44 +1185,29 @@ pub fn aggregate_with_edgelets(
     };
     let (vp1, x, rays_trusted) =
         fit_camera(&model, &vp1_lines, &vp1_lines.weight, &prep.weight, None);
+    // The vehicles with edgelets, for both edgelet fits.
+    let boxes: Vec<BoxEdgelets> = pairs
+        .iter()
+        .zip(edgelets)
+        .filter(|(p, e)| p.score > opts.min_score && !e.is_empty())
+        .filter_map(|(p, e)| {
+            Some(BoxEdgelets {
+                centre: p.box_px.filter(BoxPx::is_valid)?.center(),
+                vp1: p.vp1,
+                vp2: p.vp2,
+                edgelets: e,
+            })
+        })
+        .collect();
+    let edge_opts = opts.edgelets.as_ref().filter(|_| !boxes.is_empty());
     // Without tracks, the edgelets along the vehicles place VP1 better than the network's
     // VP1 rays (module docs of `edgelets`).
-    let edge_vp1 = opts
-        .edgelets
-        .as_ref()
-        .filter(|_| !vp1_lines.from_tracks && !edgelets.is_empty())
-        .and_then(|eo| {
-            let vehicles: Vec<(Point2, Point2, Point2, &[Edgelet])> = pairs
-                .iter()
-                .zip(edgelets)
-                .filter(|(p, e)| p.score > opts.min_score && !e.is_empty())
-                .filter_map(|(p, e)| {
-                    let c = p.box_px.filter(BoxPx::is_valid)?.center();
-                    Some((c, p.vp1, p.vp2, e.as_slice()))
-                })
-                .collect();
-            edge::fit_vp1(vp1, &vehicles, eo)
-        });
+    let edge_vp1 = edge_opts
+        .filter(|_| !vp1_lines.from_tracks)
+        .and_then(|eo| edge::fit_vp1(vp1, &boxes, eo));
     let vp1 = edge_vp1.map_or(vp1, |e| e.0);
     let model = Vp2Model { vp1, ..model };
-    let edge_fit = opts
-        .edgelets
-        .as_ref()
-        .filter(|_| !edgelets.is_empty())
-        .and_then(|eo| {
-            let vehicles: Vec<Vec<Edgelet>> = pairs
-                .iter()
-                .zip(edgelets)
-                .filter(|(p, _)| p.score > opts.min_score)
-                .filter_map(|(p, e)| {
-                    let b = p.box_px.filter(BoxPx::is_valid)?;
-                    let kept =
-                        edge::near_ray(b.center(), p.vp2, e, eo.gate_vp2_deg, eo.max_per_vehicle);
-                    (!kept.is_empty()).then_some(kept)
-                })
-                .collect();
-            edge::fit(vp1, pp, width, &vehicles, x[1], eo, opts.seed)
-        });
+    let edge_fit = edge_opts.and_then(|eo| edge::fit(vp1, pp, width, &boxes, x[1], eo, opts.seed));
     let usable = edge_fit.filter(|e| e.roll_usable);
     let mut x = x;
     if let Some(e) = usable {

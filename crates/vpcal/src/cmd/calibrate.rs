@@ -365,11 +365,12 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
         let preds = net.predict_prepared(pending)?;
         for ((frame, score, crop_box, edgelets), p) in meta.drain(..).zip(preds) {
             let prediction = p.vp;
+            let vp1 = crop_box.frame_from_box(prediction.vp1);
             let vp2 = crop_box.frame_from_box(prediction.vp2);
             // Only the edgelets near the network's VP rays are kept (memory).
             let edgelets = near_rays(
                 crop_box.center(),
-                crop_box.frame_from_box(prediction.vp1),
+                vp1,
                 vp2,
                 &edgelets,
                 gate.gate_vp2_deg,
@@ -379,7 +380,7 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
                 frame,
                 score,
                 crop_box,
-                vp1: crop_box.frame_from_box(prediction.vp1),
+                vp1,
                 vp2,
                 prediction,
                 edgelets,
