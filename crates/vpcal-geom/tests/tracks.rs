@@ -146,3 +146,41 @@ fn a_car_moving_most_of_its_length_between_samples_still_links() {
     };
     assert_eq!(link(&boxes, &strict).len(), 8);
 }
+
+#[test]
+fn a_track_on_a_curve_bends_significantly_and_a_noisy_straight_one_does_not() {
+    let opts = TrackOptions::default();
+    let track: Vec<usize> = (0..20).collect();
+    // Straight, receding, with ±1.5 px of deterministic jitter across the track.
+    let vp = Point2::new(900.0, -100.0);
+    let straight: Vec<(f64, BoxPx)> = (0..20)
+        .map(|k| {
+            let b = receding(vp, Point2::new(400.0, 900.0), 60.0, k);
+            let j = 1.5 * ((k * 7919 % 13) as f64 / 6.0 - 1.0);
+            (k as f64, BoxPx::new(b.x0 + j, b.y0, b.x1 + j, b.y1))
+        })
+        .collect();
+    let line = fit_line(&straight, &track, &opts).unwrap();
+    assert!(line.bend_t.abs() < 4.0, "{line:?}");
+    // An arc of radius 6000 px over 12° (sagitta ~33 px on 1250 px of travel) passes the
+    // straightness test (RMS < 3 % of the travel) but bends with a large t.
+    let arc = |sign: f64| -> Vec<(f64, BoxPx)> {
+        (0..20)
+            .map(|k| {
+                let a = (-6.0 + 12.0 * k as f64 / 19.0).to_radians();
+                let c = Point2::new(
+                    600.0 + sign * 6000.0 * (1.0 - a.cos()),
+                    500.0 + 6000.0 * a.sin(),
+                );
+                (k as f64, box_at(c, 40.0))
+            })
+            .collect()
+    };
+    let right = fit_line(&arc(1.0), &track, &opts).unwrap();
+    let left = fit_line(&arc(-1.0), &track, &opts).unwrap();
+    assert!(right.bend_t.abs() > 100.0, "{right:?}");
+    assert!(left.bend_t.abs() > 100.0, "{left:?}");
+    // Mirror images bend to opposite sides of the same direction.
+    let s = right.dir.dot(left.dir).signum();
+    assert!(right.bend_t * left.bend_t * s < 0.0, "{right:?} {left:?}");
+}

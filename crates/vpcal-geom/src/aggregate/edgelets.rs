@@ -24,6 +24,7 @@
 //! vehicle tracks give VP1.
 
 use super::robust::{line_angle_diff, nelder_mead, percentile, sd, SplitMix};
+use super::tracks::Tangent;
 use crate::point::Point2;
 
 /// A short straight piece of an image edge: position (frame pixels), direction of the edge
@@ -82,7 +83,7 @@ impl Default for EdgeletFitOptions {
             bootstrap: 20,
             max_roll_sd_deg: 0.5,
             max_focal_log_spread: 0.05,
-            max_vp2_widths: 10.0,
+            max_vp2_widths: 20.0,
         }
     }
 }
@@ -385,4 +386,205 @@ pub fn fit_vp1(
     let q = nelder_mead(cost, &[start.x, start.y], &[d, d], 400);
     let vp1 = Point2::new(q[0], q[1]);
     vp1.is_finite().then_some((vp1, picked.len(), used))
+}
+
+/// A vehicle on a curved road: its local direction of travel (from its track) and its
+/// edgelets.
+#[derive(Debug, Clone, Copy)]
+pub struct CurvedVehicle<'a> {
+    pub tangent: Tangent,
+    pub edgelets: &'a [Edgelet],
+}
+
+/// The camera [`fit_curved`] found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurvedFit {
+    pub focal_px: f64,
+    /// Angle of the horizon's direction, radians (as [`EdgeletFit::roll`]).
+    pub roll: f64,
+    /// The median of the vehicles' own VP1s along the horizon, and its VP2.
+    pub vp1: Point2,
+    pub vp2: Point2,
+    /// Edgelets and vehicles the fit used.
+    pub edgelets: usize,
+    pub vehicles: usize,
+    /// Bootstrap spread over vehicles.
+    pub roll_sd_deg: f64,
+    pub focal_px_p16: f64,
+    pub focal_px_p84: f64,
+}
+
+/// Vehicles with their edgelets, flattened: `range[g]` of `point`/`angle` belongs to
+/// `tangent[g]`.
+struct CurvedFlat {
+    point: Vec<Point2>,
+    angle: Vec<f64>,
+    tangent: Vec<Tangent>,
+    range: Vec<std::ops::Range<usize>>,
+}
+
+impl CurvedFlat {
+    fn new(vehicles: &[CurvedVehicle], max_edgelets: usize) -> CurvedFlat {
+        let total: usize = vehicles.iter().map(|v| v.edgelets.len()).sum();
+        let step = (total as f64 / max_edgelets as f64).max(1.0);
+        let mut flat = CurvedFlat {
+            point: vec![],
+            angle: vec![],
+            tangent: vec![],
+            range: vec![],
+        };
+        let mut next = 0.0;
+        for (i, v) in vehicles.iter().enumerate() {
+            if (i as f64) < next || v.edgelets.is_empty() {
+                continue;
+            }
+            next += step;
+            let start = flat.point.len();
+            for e in v.edgelets {
+                flat.point.push(e.point());
+                flat.angle.push(e.angle);
+            }
+            flat.tangent.push(v.tangent);
+            flat.range.push(start..flat.point.len());
+        }
+        flat
+    }
+
+    /// Cauchy cost of `x = [ln f, roll, y0]`: the horizon runs through `(pp.x, y0)` at angle
+    /// `roll`; vehicle `g`'s VP1 is where its tangent meets the horizon, its VP2 the point of
+    /// the horizon orthogonal to that VP1 for focal length f, and VP3 the vertical one. An
+    /// edgelet within `ex1` of the direction to its VP1 is scored against it, any other
+    /// against the nearer of VP2 and VP3 (vertical edges would otherwise pull the fit).
+    fn cost(&self, gw: &[f64], pp: Point2, x: &[f64], s: f64, ex1: f64) -> f64 {
+        let h = Point2::new(x[1].cos(), x[1].sin());
+        let n = Point2::new(-h.y, h.x);
+        let h0 = Point2::new(pp.x, x[2]);
+        let f2 = (2.0 * x[0]).exp();
+        // VP3 = pp + dv * f^2 / |dv|^2, dv from the horizon's foot point to pp; directions to
+        // it are taken as (pp - p) |dv|^2 / f^2 + dv, finite when the horizon passes near pp.
+        let foot = h0 + h * (pp - h0).dot(h);
+        let dv = pp - foot;
+        let k3 = dv.dot(dv) / f2;
+        let mut c = 0.0;
+        for (g, (t, range)) in self.tangent.iter().zip(&self.range).enumerate() {
+            let w = gw[g];
+            let tn = t.dir.dot(n);
+            if w == 0.0 || tn.abs() < 1e-9 {
+                continue;
+            }
+            let vp1 = t.point + t.dir * (-(t.point - h0).dot(n) / tn);
+            let a = vp1 - pp;
+            let u = -a.dot(h) / (f2 + a.dot(a));
+            for i in range.clone() {
+                let (p, ang) = (self.point[i], self.angle[i]);
+                let d1 = vp1 - p;
+                let r1 = line_angle_diff(ang - d1.y.atan2(d1.x));
+                let r = if r1.abs() < ex1 {
+                    r1
+                } else {
+                    let d2 = d1 * u + h;
+                    let d3 = (pp - p) * k3 + dv;
+                    let r2 = line_angle_diff(ang - d2.y.atan2(d2.x)).abs();
+                    let r3 = line_angle_diff(ang - d3.y.atan2(d3.x)).abs();
+                    r2.min(r3)
+                } / s;
+                c += w * (1.0 + r * r).ln();
+            }
+        }
+        c
+    }
+}
+
+/// The horizon and the focal length of a curved road, where every vehicle has its own
+/// heading: each vehicle's VP1 lies where its track's tangent meets the horizon, and its
+/// edgelets point at that VP1, at the VP2 orthogonal to it, or at VP3. Three parameters
+/// (ln f, roll, the horizon's height at `pp.x`), from a grid (around `roll0`, on at most
+/// 2000 edgelets) refined by Nelder-Mead on up to `max_edgelets`, with a bootstrap over
+/// vehicles. `None` with fewer than `min_vehicles` vehicles or `min_edgelets` edgelets.
+pub fn fit_curved(
+    pp: Point2,
+    width: f64,
+    height: f64,
+    vehicles: &[CurvedVehicle],
+    roll0: f64,
+    opts: &EdgeletFitOptions,
+    seed: u64,
+) -> Option<CurvedFit> {
+    let full = CurvedFlat::new(vehicles, opts.max_edgelets);
+    if full.tangent.len() < opts.min_vehicles || full.point.len() < opts.min_edgelets {
+        return None;
+    }
+    let coarse = CurvedFlat::new(vehicles, 2000);
+    let s = opts.scale_deg.to_radians();
+    let ex1 = opts.exclude_vp1_deg.to_radians();
+    let ones = vec![1.0; full.tangent.len()];
+    let (lo, hi) = ((0.3 * width).ln(), (10.0 * width).ln());
+    let mut best = (f64::INFINITY, [0.0; 3]);
+    for i in 0..16 {
+        let ln_f = lo + (hi - lo) * f64::from(i) / 15.0;
+        for j in -6..=6 {
+            let roll = roll0 + f64::from(j).to_radians();
+            for k in 0..40 {
+                let y0 = pp.y - 3.0 * height * (1.0 - f64::from(k) / 40.0);
+                let x = [ln_f, roll, y0];
+                let c = coarse.cost(&ones[..coarse.tangent.len()], pp, &x, s, ex1);
+                if c < best.0 {
+                    best = (c, x);
+                }
+            }
+        }
+    }
+    let step0 = [0.05, 0.3f64.to_radians(), 0.01 * height];
+    let x = nelder_mead(|x| full.cost(&ones, pp, x, s, ex1), &best.1, &step0, 400);
+    let mut rng = SplitMix(seed ^ 0xC0C0_1E75);
+    let (mut fs, mut rolls) = (vec![], vec![]);
+    for _ in 0..opts.bootstrap.min(10) {
+        let w: Vec<f64> = (0..coarse.tangent.len()).map(|_| rng.poisson1()).collect();
+        let xb = nelder_mead(|x| coarse.cost(&w, pp, x, s, ex1), &x, &step0, 150);
+        fs.push(xb[0].exp());
+        rolls.push(line_angle_diff(xb[1] - x[1]).to_degrees());
+    }
+    // VP1: the median of the vehicles' own VP1s along the horizon.
+    let h = Point2::new(x[1].cos(), x[1].sin());
+    let n = Point2::new(-h.y, h.x);
+    let h0 = Point2::new(pp.x, x[2]);
+    let along: Vec<f64> = full
+        .tangent
+        .iter()
+        .filter(|t| t.dir.dot(n).abs() > 1e-9)
+        .map(|t| {
+            let vp1 = t.point + t.dir * (-(t.point - h0).dot(n) / t.dir.dot(n));
+            (vp1 - h0).dot(h)
+        })
+        .filter(|a| a.is_finite())
+        .collect();
+    if along.is_empty() {
+        return None;
+    }
+    let vp1 = h0 + h * percentile(along, 50.0);
+    let (hd, u) = vp2_direction(vp1, pp, x[0], x[1]);
+    let vp2 = vp1 + hd / u;
+    let (p16, p84) = if fs.is_empty() {
+        (f64::NAN, f64::NAN)
+    } else {
+        (percentile(fs.clone(), 16.0), percentile(fs, 84.0))
+    };
+    // A fit that left the grid's range of focal lengths or rolls found no curve's camera.
+    let inside =
+        (lo..=hi).contains(&x[0]) && line_angle_diff(x[1] - roll0).abs() <= 8f64.to_radians();
+    (inside && vp1.is_finite() && vp2.is_finite()).then_some(CurvedFit {
+        focal_px: x[0].exp(),
+        roll: x[1],
+        vp1,
+        vp2,
+        edgelets: full.point.len(),
+        vehicles: full.tangent.len(),
+        roll_sd_deg: if rolls.is_empty() {
+            f64::NAN
+        } else {
+            sd(&rolls)
+        },
+        focal_px_p16: p16,
+        focal_px_p84: p84,
+    })
 }

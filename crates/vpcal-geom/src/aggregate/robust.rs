@@ -61,7 +61,7 @@
 //! On the 12 BrnoCompSpeed training videos this is measured against the reference rule by
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
-use super::edgelets::{self as edge, BoxEdgelets, Edgelet, EdgeletFitOptions};
+use super::edgelets::{self as edge, BoxEdgelets, CurvedVehicle, Edgelet, EdgeletFitOptions};
 use super::tracks::{self, TrackLine, TrackOptions};
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
@@ -130,6 +130,22 @@ pub struct RobustOptions {
     /// ... or when the track lines' median angle around their own VP1 is below this fraction
     /// of the network rays' (`evidence.track_residual_deg` vs `vp1_ray_scatter_deg`).
     pub track_residual_ratio: f64,
+    /// The road is taken as curved, and the track lines are not used for VP1, when at least
+    /// `curved_share` of the qualifying tracks bend the same way, significantly (t-statistic
+    /// above `curved_bend_t`, [`TrackLine::bend_t`]) and by more than `curved_bend_deg`
+    /// ([`TrackLine::bend_deg`]): on a curve every car has its own heading, so lines fitted to
+    /// whole tracks miss VP1 and the horizon (`evidence.curved_tracks`). Exact boxes of cars
+    /// on a straight road bend a little too (a box's centre is not a fixed point of the car),
+    /// significantly but by less than a degree or two on the synthetic suite.
+    pub curved_bend_t: f64,
+    pub curved_bend_deg: f64,
+    pub curved_share: f64,
+    /// ... and at least this many tracks bend so (one or two bent tracks on a short clip are
+    /// no curve: a wide-angle camera's box centres bend by a few degrees on straight roads).
+    /// The share counts only tracks that can tell: whose turn has a standard error below
+    /// `curved_max_se_deg` ([`TrackLine::bend_se_deg`]).
+    pub min_curved_tracks: usize,
+    pub curved_max_se_deg: f64,
     /// Fit the horizon's roll (and, where VP2 is near enough, the focal length) to edgelets
     /// inside the vehicle boxes when they are given ([`aggregate_with_edgelets`]); `None`:
     /// never.
@@ -162,6 +178,11 @@ impl Default for RobustOptions {
             track_threshold_deg: 1.0,
             track_above_scatter_deg: 3.0,
             track_residual_ratio: 0.15,
+            curved_bend_t: 4.0,
+            curved_bend_deg: 3.0,
+            curved_share: 0.6,
+            min_curved_tracks: 5,
+            curved_max_se_deg: 1.0,
             edgelets: Some(EdgeletFitOptions::default()),
         }
     }
@@ -195,6 +216,15 @@ pub struct Evidence {
     /// Median angle between the track lines and the VP1 they alone give, degrees (`None`
     /// without enough agreeing tracks).
     pub track_residual_deg: Option<f64>,
+    /// Track lines that bend significantly the same way (the larger of the two sides), and
+    /// whether they made the road count as curved, so that VP1 did not come from the tracks.
+    pub curved_tracks: usize,
+    pub road_curved: bool,
+    /// Whether the horizon and focal length came from the curved-road fit
+    /// ([`edge::fit_curved`]: each car's own VP1 from its track's tangent), and on how many
+    /// vehicles.
+    pub curved_fit: bool,
+    pub curved_vehicles: usize,
     /// Edgelets (and vehicles with edgelets) the edgelet fit used; 0 without one.
     pub edgelets: usize,
     pub edgelet_vehicles: usize,
@@ -949,6 +979,9 @@ pub(super) fn sd(v: &[f64]) -> f64 {
 /// Fewer VP1 lines than this within the threshold of VP1 is "not enough evidence".
 const MIN_VP1_INLIERS: usize = 5;
 
+/// A curved road's track tangents span this many boxes before and after each box.
+const CURVE_TANGENT_HALF: usize = 4;
+
 /// The lines VP1 is fitted to, with their weights and the Cauchy scale of their angles.
 #[derive(Debug, Clone)]
 struct Vp1Lines {
@@ -1046,14 +1079,42 @@ fn locate_vp1_from_network(
     Some(p1)
 }
 
+/// How many of the track lines bend with `|bend_t| > min_t` and `|bend_deg| > min_deg`
+/// towards the same side (the larger count of the two sides), the lines' directions first
+/// oriented alike (doubled-angle mean).
+fn bending_the_same_way(lines: &[TrackLine], min_t: f64, min_deg: f64) -> usize {
+    let (c, s) = lines.iter().fold((0.0, 0.0), |(c, s), t| {
+        let a = 2.0 * t.dir.y.atan2(t.dir.x);
+        (c + a.cos(), s + a.sin())
+    });
+    let mean = 0.5 * f64::atan2(s, c);
+    let reference = Point2::new(mean.cos(), mean.sin());
+    let (mut left, mut right) = (0, 0);
+    for t in lines {
+        let sign = if t.dir.dot(reference) >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        let (bt, bd) = (sign * t.bend_t, sign * t.bend_deg);
+        if bt > min_t && bd > min_deg {
+            left += 1;
+        } else if bt < -min_t && bd < -min_deg {
+            right += 1;
+        }
+    }
+    left.max(right)
+}
+
 /// The (frame, box) of every pair the tracker may use: a box, a frame and a score above the
 /// threshold (its VPs do not matter).
-fn tracked_boxes(pairs: &[VehicleVps], opts: &RobustOptions) -> Vec<(f64, BoxPx)> {
+fn tracked_boxes(pairs: &[VehicleVps], opts: &RobustOptions) -> (Vec<(f64, BoxPx)>, Vec<usize>) {
     pairs
         .iter()
-        .filter(|p| p.score > opts.min_score)
-        .filter_map(|p| Some((p.frame?, p.box_px.filter(BoxPx::is_valid)?)))
-        .collect()
+        .enumerate()
+        .filter(|(_, p)| p.score > opts.min_score)
+        .filter_map(|(i, p)| Some(((p.frame?, p.box_px.filter(BoxPx::is_valid)?), i)))
+        .unzip()
 }
 
 /// Estimate the camera from `pairs` with principal point `pp`.
@@ -1113,9 +1174,31 @@ pub fn aggregate_with_edgelets(
     }
     let prep = full.thinned(opts.max_fit_vehicles);
     let mut rng = SplitMix(opts.seed ^ 0x5EED_CA1B);
-    let track_lines = match &opts.tracks {
-        Some(t) => tracks::track_lines(&tracked_boxes(pairs, opts), t),
-        None => Vec::new(),
+    let (tracked_boxes, tracked_pairs) = tracked_boxes(pairs, opts);
+    let links = opts
+        .tracks
+        .as_ref()
+        .map_or_else(Vec::new, |t| tracks::link(&tracked_boxes, t));
+    // Every track long enough, straight or not (a curve's tracks are the evidence that the
+    // road curves), and the straight ones, which are VP1 evidence.
+    let (moving, track_lines): (Vec<TrackLine>, Vec<TrackLine>) = match &opts.tracks {
+        Some(t) => {
+            let any_shape = TrackOptions {
+                max_rms_fraction: f64::INFINITY,
+                ..t.clone()
+            };
+            let moving: Vec<TrackLine> = links
+                .iter()
+                .filter_map(|l| tracks::fit_line(&tracked_boxes, l, &any_shape))
+                .collect();
+            let straight = moving
+                .iter()
+                .filter(|l| l.rms <= t.max_rms_fraction * l.travel)
+                .copied()
+                .collect();
+            (moving, straight)
+        }
+        None => (Vec::new(), Vec::new()),
     };
     let network_lines = prep.network_vp1_lines(opts.vp1_threshold_deg);
     let network = locate_vp1_from_network(&network_lines, &prep, pp, width, &mut rng);
@@ -1142,7 +1225,16 @@ pub fn aggregate_with_edgelets(
         })
         .flatten();
     let track_residual = tracked.as_ref().map(|t| t.3);
+    let telling: Vec<TrackLine> = moving
+        .iter()
+        .filter(|l| l.bend_se_deg < opts.curved_max_se_deg)
+        .copied()
+        .collect();
+    let curved_tracks = bending_the_same_way(&telling, opts.curved_bend_t, opts.curved_bend_deg);
+    let road_curved = curved_tracks >= opts.min_curved_tracks.max(1)
+        && curved_tracks as f64 >= opts.curved_share * telling.len() as f64;
     let use_tracks = match (&tracked, network_scatter) {
+        _ if road_curved => false,
         (None, _) => false,
         (Some(_), None) => true,
         (Some(t), Some(scatter)) => {
@@ -1216,6 +1308,37 @@ pub fn aggregate_with_edgelets(
             x[0] = e.focal_px.ln();
         }
     }
+    // On a curved road every car has its own VP1 on the horizon: fit the horizon and the
+    // focal length to the cars' track tangents and edgelets together.
+    let curved_fit = edge_opts.filter(|_| road_curved).and_then(|eo| {
+        let tangents = tracks::tangents(&tracked_boxes, &links, CURVE_TANGENT_HALF, 3.0);
+        let vehicles: Vec<CurvedVehicle> = tangents
+            .iter()
+            .zip(&tracked_pairs)
+            .filter_map(|(t, &i)| {
+                let e = edgelets.get(i)?;
+                (!e.is_empty()).then_some(CurvedVehicle {
+                    tangent: (*t)?,
+                    edgelets: e,
+                })
+            })
+            .collect();
+        edge::fit_curved(pp, width, height, &vehicles, x[1], eo, opts.seed)
+    });
+    let (model, vp1) = match curved_fit {
+        Some(c) => {
+            x[0] = c.focal_px.ln();
+            x[1] = c.roll;
+            (
+                Vp2Model {
+                    vp1: c.vp1,
+                    ..model
+                },
+                c.vp1,
+            )
+        }
+        None => (model, vp1),
+    };
     let (h, u) = model.vp2(x[0], x[1]);
     let vp2 = vp1 + h / u;
     let calibration = Calibration::from_vps(vp1, vp2, pp)
@@ -1252,6 +1375,10 @@ pub fn aggregate_with_edgelets(
         vp1_from_tracks: vp1_lines.from_tracks,
         vp1_ray_scatter_deg: network_scatter,
         track_residual_deg: track_residual,
+        curved_tracks,
+        road_curved,
+        curved_fit: curved_fit.is_some(),
+        curved_vehicles: curved_fit.map_or(0, |c| c.vehicles),
         vp1_from_edgelets: edge_vp1.is_some(),
         vp1_edgelets: edge_vp1.map_or(0, |e| e.1),
         edgelets: edge_fit.map_or(0, |e| e.edgelets),

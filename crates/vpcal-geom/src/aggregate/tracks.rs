@@ -59,6 +59,17 @@ pub struct TrackLine {
     pub travel: f64,
     /// RMS distance of the centres from the line, pixels.
     pub rms: f64,
+    /// How significantly the track bends: the t-statistic of the quadratic term of a parabola
+    /// fitted to the centres across `dir` (signed: positive when it bends towards the left of
+    /// `dir`, i.e. towards `(dir.y, -dir.x)` in image coordinates with y down). A straight
+    /// track with noisy boxes gives |t| of a few at most; a car on a curved road, tens.
+    pub bend_t: f64,
+    /// The change of the parabola's direction from the first to the last centre, degrees
+    /// (signed like `bend_t`): how much the vehicle turned, whether or not significantly.
+    pub bend_deg: f64,
+    /// The standard error of `bend_deg` (from the scatter of the centres around the
+    /// parabola): how well this track can tell a turn from a straight drive.
+    pub bend_se_deg: f64,
 }
 
 /// Join boxes into tracks. `boxes[i]` is `(frame, box)`; returns, per track, the indices of
@@ -181,6 +192,7 @@ pub fn fit_line(boxes: &[(f64, BoxPx)], track: &[usize], opts: &TrackOptions) ->
         .collect();
     sizes.sort_by(f64::total_cmp);
     let size = sizes[n / 2];
+    let (bend_t, bend_deg, bend_se_deg) = bend(&centres, mean, dir);
     let ok = travel.is_finite()
         && travel > 0.0
         && travel >= opts.min_travel_boxes * size
@@ -191,7 +203,98 @@ pub fn fit_line(boxes: &[(f64, BoxPx)], track: &[usize], opts: &TrackOptions) ->
         boxes: n,
         travel,
         rms,
+        bend_t,
+        bend_deg,
+        bend_se_deg,
     })
+}
+
+/// The t-statistic of `c` in `v = a + b u + c u^2`, least squares over the centres, where `u`
+/// runs along `dir` and `v` across it (towards `(dir.y, -dir.x)`) from `mean`, and the change
+/// of the parabola's direction between the extreme centres and its standard error, degrees.
+/// (0, 0, inf) with fewer than 5 centres or a degenerate fit; the t is large when the noise is
+/// nil.
+fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64) {
+    let n = centres.len();
+    if n < 5 {
+        return (0.0, 0.0, f64::INFINITY);
+    }
+    let across = Point2::new(dir.y, -dir.x);
+    // Normal equations of the 3-parameter fit, with u scaled to about [-1, 1].
+    let uv: Vec<(f64, f64)> = centres
+        .iter()
+        .map(|c| ((*c - mean).dot(dir), (*c - mean).dot(across)))
+        .collect();
+    let scale = uv.iter().fold(0.0f64, |m, (u, _)| m.max(u.abs()));
+    if scale.is_nan() || scale <= 0.0 {
+        return (0.0, 0.0, f64::INFINITY);
+    }
+    let mut ata = [[0.0f64; 3]; 3];
+    let mut atb = [0.0f64; 3];
+    for &(u, v) in &uv {
+        let u = u / scale;
+        let row = [1.0, u, u * u];
+        for i in 0..3 {
+            for j in 0..3 {
+                ata[i][j] += row[i] * row[j];
+            }
+            atb[i] += row[i] * v;
+        }
+    }
+    let Some(inv) = invert3(&ata) else {
+        return (0.0, 0.0, f64::INFINITY);
+    };
+    let coef: Vec<f64> = (0..3)
+        .map(|i| (0..3).map(|j| inv[i][j] * atb[j]).sum())
+        .collect();
+    let sse: f64 = uv
+        .iter()
+        .map(|&(u, v)| {
+            let u = u / scale;
+            (v - coef[0] - coef[1] * u - coef[2] * u * u).powi(2)
+        })
+        .sum();
+    // A floor on the noise (0.05 px) keeps exact synthetic centres finite.
+    let sigma2 = (sse / (n - 3) as f64).max(0.05 * 0.05);
+    let se = (sigma2 * inv[2][2]).sqrt();
+    if !(se > 0.0 && se.is_finite()) {
+        return (0.0, 0.0, f64::INFINITY);
+    }
+    // dv/du = 2 c u / scale^2 (u unscaled) at the two ends.
+    let (lo, hi) = uv
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), (u, _)| {
+            (l.min(*u), h.max(*u))
+        });
+    let slope = |u: f64| 2.0 * coef[2] * u / (scale * scale);
+    let turned = (slope(hi).atan() - slope(lo).atan()).to_degrees();
+    // Small angles: the turn is about 2 c (hi - lo) / scale^2 radians.
+    let turned_se = (2.0 * se * (hi - lo) / (scale * scale)).to_degrees();
+    (coef[2] / se, turned, turned_se)
+}
+
+/// Inverse of a 3x3 matrix, `None` when (nearly) singular.
+fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+    let c =
+        |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
+    let cof = [
+        [c(1, 2, 1, 2), -c(1, 2, 0, 2), c(1, 2, 0, 1)],
+        [-c(0, 2, 1, 2), c(0, 2, 0, 2), -c(0, 2, 0, 1)],
+        [c(0, 1, 1, 2), -c(0, 1, 0, 2), c(0, 1, 0, 1)],
+    ];
+    let det = m[0][0] * cof[0][0] + m[0][1] * cof[0][1] + m[0][2] * cof[0][2];
+    let norm = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+    if det.is_nan() || det.abs() <= 1e-12 * norm.powi(3) {
+        return None;
+    }
+    // inverse = adjugate / det, adjugate = transpose of the cofactors.
+    let mut inv = [[0.0; 3]; 3];
+    for (i, row) in inv.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = cof[j][i] / det;
+        }
+    }
+    Some(inv)
 }
 
 /// Link `boxes` into tracks and return the lines of the tracks that qualify.
@@ -200,4 +303,57 @@ pub fn track_lines(boxes: &[(f64, BoxPx)], opts: &TrackOptions) -> Vec<TrackLine
         .iter()
         .filter_map(|t| fit_line(boxes, t, opts))
         .collect()
+}
+
+/// A vehicle's local direction of travel: the line through a box centre along the track.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tangent {
+    pub point: Point2,
+    /// Unit direction.
+    pub dir: Point2,
+}
+
+/// Per box (indexed like `boxes`), the direction its track runs at that box: the major axis
+/// of the centres of the `half` boxes before and after it in its track (total least
+/// squares). `None` for boxes without `half` neighbours on both sides, or whose neighbours
+/// moved less than `min_spread_px` (RMS along the axis). On a curved road each car has its own
+/// heading; these tangents follow it, where a line through the whole track does not.
+pub fn tangents(
+    boxes: &[(f64, BoxPx)],
+    tracks: &[Vec<usize>],
+    half: usize,
+    min_spread_px: f64,
+) -> Vec<Option<Tangent>> {
+    let mut out = vec![None; boxes.len()];
+    for track in tracks {
+        if track.len() < 2 * half + 1 {
+            continue;
+        }
+        for j in half..track.len() - half {
+            let window = &track[j - half..=j + half];
+            let n = window.len() as f64;
+            let centres: Vec<Point2> = window.iter().map(|&i| boxes[i].1.center()).collect();
+            let mean = centres
+                .iter()
+                .fold(Point2::new(0.0, 0.0), |a, c| a + *c / n);
+            let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+            for c in &centres {
+                let d = *c - mean;
+                sxx += d.x * d.x;
+                sxy += d.x * d.y;
+                syy += d.y * d.y;
+            }
+            let half_trace = (sxx + syy) / 2.0;
+            let root = (((sxx - syy) / 2.0).powi(2) + sxy * sxy).sqrt();
+            if ((half_trace + root) / n).sqrt() < min_spread_px {
+                continue;
+            }
+            let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+            out[track[j]] = Some(Tangent {
+                point: boxes[track[j]].1.center(),
+                dir: Point2::new(angle.cos(), angle.sin()),
+            });
+        }
+    }
+    out
 }

@@ -63,6 +63,24 @@ fn deg(a: Option<f64>) -> String {
     a.map_or("-".to_string(), |a| format!("{a:.2}°"))
 }
 
+/// "; the road curves (N tracks bend alike)" when the curved-road test set the tracks aside.
+fn curved_note(e: &robust::Evidence) -> String {
+    if e.curved_fit {
+        format!(
+            " (not used for VP1: the road curves, {} tracks bend alike; horizon and focal length \
+             from the track tangents and edgelets of {} vehicles)",
+            e.curved_tracks, e.curved_vehicles
+        )
+    } else if e.road_curved {
+        format!(
+            " (not used for VP1: the road curves, {} tracks bend alike)",
+            e.curved_tracks
+        )
+    } else {
+        String::new()
+    }
+}
+
 /// Aggregate with `method`; `image_size` is used by the robust method's priors.
 ///
 /// # Errors
@@ -125,17 +143,19 @@ pub fn aggregate(
                     )
                 } else if e.vp1_from_edgelets {
                     format!(
-                        "VP1 from {} edgelets along the vehicles; the network's rays {}, {} straight vehicle tracks",
+                        "VP1 from {} edgelets along the vehicles; the network's rays {}, {} straight vehicle tracks{}",
                         e.vp1_edgelets,
                         deg(e.vp1_ray_scatter_deg),
-                        e.track_lines
+                        e.track_lines,
+                        curved_note(e)
                     )
                 } else {
                     format!(
-                        "VP1 from the network's rays, median angle {}; {} straight vehicle tracks, {}",
+                        "VP1 from the network's rays, median angle {}; {} straight vehicle tracks, {}{}",
                         deg(e.vp1_ray_scatter_deg),
                         e.track_lines,
-                        deg(e.track_residual_deg)
+                        deg(e.track_residual_deg),
+                        curved_note(e)
                     )
                 },
                 e.vp2_inliers,
@@ -177,6 +197,10 @@ pub fn aggregate(
                 "vp1_from_tracks": e.vp1_from_tracks,
                 "vp1_ray_scatter_deg": e.vp1_ray_scatter_deg,
                 "track_residual_deg": e.track_residual_deg,
+                "curved_tracks": e.curved_tracks,
+                "road_curved": e.road_curved,
+                "curved_fit": e.curved_fit,
+                "curved_vehicles": e.curved_vehicles,
                 "vp1_from_edgelets": e.vp1_from_edgelets,
                 "vp1_edgelets": e.vp1_edgelets,
                 "edgelets": e.edgelets,
