@@ -4,8 +4,11 @@
 //! outliers.
 
 use proptest::prelude::*;
-use vpcal_geom::aggregate::edgelets::{near_rays, Edgelet};
+use vpcal_geom::aggregate::edgelets::{
+    fit_curved, near_rays, CurvedVehicle, Edgelet, EdgeletFitOptions,
+};
 use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
+use vpcal_geom::aggregate::tracks::Tangent;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::{BoxPx, Point2};
@@ -558,5 +561,103 @@ proptest! {
         let near2 = edgelets.iter().filter(|e| diff(e, v2) < 12.0 - 1e-9).count();
         let kept2 = kept.iter().filter(|e| diff(e, v2) < 12.0 + 1e-9).count();
         prop_assert!(kept2 >= near2.min(max));
+    }
+}
+
+#[test]
+fn on_a_curved_road_each_cars_own_vp1_gives_the_horizon_and_focal_length() {
+    // A road curving by 43° over 60 m (radius 80 m), two lanes, a rolled camera. Each car's
+    // tangent points at its own VP1; its edgelets run across it (its VP2), along it (its VP1)
+    // or up (VP3), with 0.3° of noise.
+    let scene = Scene::new(1400.0, 0.35, 2f64.to_radians(), 0.3, 10.0);
+    let radius = 80.0;
+    let mut rng = Lcg(21);
+    let mut cars: Vec<(Tangent, Vec<Edgelet>)> = Vec::new();
+    while cars.len() < 80 {
+        let s = 60.0 * rng.next();
+        let psi = s / radius;
+        let lane = if rng.next() < 0.5 { -1.75 } else { 1.75 };
+        let (d, n) = ([psi.sin(), psi.cos(), 0.0], [psi.cos(), -psi.sin(), 0.0]);
+        let at = |a: f64, b: f64, z: f64| {
+            [
+                radius * (1.0 - psi.cos()) + lane * n[0] + a * d[0] + b * n[0],
+                15.0 + radius * psi.sin() + lane * n[1] + a * d[1] + b * n[1],
+                z,
+            ]
+        };
+        let (Some((c, _)), Some((ahead, _))) = (
+            scene.project(at(0.0, 0.0, 0.8)),
+            scene.project(at(1.0, 0.0, 0.8)),
+        ) else {
+            continue;
+        };
+        let dir = (ahead - c) / (ahead - c).norm();
+        let mut edgelets = Vec::new();
+        for k in 0..34 {
+            let x = at(
+                4.0 * rng.next() - 2.0,
+                1.8 * rng.next() - 0.9,
+                0.3 + 1.1 * rng.next(),
+            );
+            let step = match k {
+                0..20 => n,
+                20..30 => d,
+                _ => [0.0, 0.0, 1.0],
+            };
+            let y = [
+                x[0] + 0.1 * step[0],
+                x[1] + 0.1 * step[1],
+                x[2] + 0.1 * step[2],
+            ];
+            let (Some((p, _)), Some((q, _))) = (scene.project(x), scene.project(y)) else {
+                continue;
+            };
+            edgelets.push(Edgelet {
+                x: p.x,
+                y: p.y,
+                angle: (q.y - p.y).atan2(q.x - p.x) + 0.3f64.to_radians() * rng.normal(),
+                strength: 50.0,
+            });
+        }
+        cars.push((Tangent { point: c, dir }, edgelets));
+    }
+    let vehicles: Vec<CurvedVehicle> = cars
+        .iter()
+        .map(|(t, e)| CurvedVehicle {
+            tangent: *t,
+            edgelets: e,
+        })
+        .collect();
+    let opts = EdgeletFitOptions::default();
+    let fit = fit_curved(scene.pp, 1920.0, 1080.0, &vehicles, 0.0, &opts, 5).unwrap();
+    let truth = Calibration::from_vps(
+        scene.vp([0.0, 1.0, 0.0]),
+        scene.vp([1.0, 0.0, 0.0]),
+        scene.pp,
+    )
+    .unwrap();
+    let est = Calibration::from_vps(fit.vp1, fit.vp2, scene.pp).unwrap();
+    let angle = line_deg(est.horizon.angle() - truth.horizon.angle());
+    // Where the horizon crosses the image's vertical centre line.
+    let y_at_pp =
+        |v1: Point2, v2: Point2| v1.y + (v2.y - v1.y) * (scene.pp.x - v1.x) / (v2.x - v1.x);
+    let dy =
+        y_at_pp(fit.vp1, fit.vp2) - y_at_pp(scene.vp([0.0, 1.0, 0.0]), scene.vp([1.0, 0.0, 0.0]));
+    assert!(angle.abs() < 0.3, "horizon angle off by {angle}°: {fit:?}");
+    assert!(dy.abs() < 10.0, "horizon {dy} px off at pp.x: {fit:?}");
+    assert!((fit.focal_px / scene.f - 1.0).abs() < 0.03, "{fit:?}");
+    // Every car took part.
+    assert_eq!(fit.vehicles, 80);
+    // Too few vehicles: no fit.
+    assert!(fit_curved(scene.pp, 1920.0, 1080.0, &vehicles[..10], 0.0, &opts, 5).is_none());
+}
+
+/// An angle difference between two lines, in degrees within (-90, 90].
+fn line_deg(a: f64) -> f64 {
+    let d = a.to_degrees().rem_euclid(180.0);
+    if d > 90.0 {
+        d - 180.0
+    } else {
+        d
     }
 }

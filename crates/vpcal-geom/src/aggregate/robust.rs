@@ -1439,15 +1439,22 @@ pub fn aggregate_with_edgelets(
             .iter()
             .map(|a| line_angle_diff((a - a0).to_radians()).to_degrees())
             .collect();
-        // Where the edgelets decided, their own bootstrap (VP1 fixed) is the spread.
-        let (p16, p84) = match usable.filter(|e| e.focal_usable) {
-            Some(e) => (e.focal_px_p16, e.focal_px_p84),
-            None => (percentile(fs.clone(), 16.0), percentile(fs.clone(), 84.0)),
+        // Where the edgelets decided, their own bootstrap is the spread (the curved-road
+        // fit's, or the straight fit's with VP1 fixed).
+        let (p16, p84) = match (curved_fit, usable.filter(|e| e.focal_usable)) {
+            (Some(c), _) => (c.focal_px_p16, c.focal_px_p84),
+            (None, Some(e)) => (e.focal_px_p16, e.focal_px_p84),
+            (None, None) => (percentile(fs.clone(), 16.0), percentile(fs.clone(), 84.0)),
+        };
+        let horizon_sd = match (curved_fit, usable) {
+            (Some(c), _) => c.roll_sd_deg,
+            (None, Some(e)) => e.roll_sd_deg,
+            (None, None) => sd(&angles),
         };
         Some(Confidence {
             focal_px_p16: p16,
             focal_px_p84: p84,
-            horizon_angle_sd_deg: usable.map_or_else(|| sd(&angles), |e| e.roll_sd_deg),
+            horizon_angle_sd_deg: horizon_sd,
             vp1_sd_px: ((sd(&vx).powi(2) + sd(&vy).powi(2)) / 2.0).sqrt(),
             focal_px_data_only: data_only,
             resamples: fs.len(),
