@@ -162,6 +162,40 @@ fn predict(boxes: &[(f64, BoxPx)], track: &[usize], frame: f64) -> BoxPx {
     BoxPx::new(b1.x0 + d.x, b1.y0 + d.y, b1.x1 + d.x, b1.y1 + d.y)
 }
 
+/// The principal axes of a set of points (total least squares line).
+struct Axis {
+    mean: Point2,
+    /// Unit direction of the major axis.
+    dir: Point2,
+    /// RMS distance of the points from the mean along, and across, the major axis.
+    major_rms: f64,
+    minor_rms: f64,
+}
+
+impl Axis {
+    fn of(points: &[Point2]) -> Axis {
+        let n = points.len().max(1) as f64;
+        let mean = points.iter().fold(Point2::new(0.0, 0.0), |a, c| a + *c) / n;
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        for c in points {
+            let d = *c - mean;
+            sxx += d.x * d.x;
+            sxy += d.x * d.y;
+            syy += d.y * d.y;
+        }
+        // Eigen-decomposition of the 2x2 scatter matrix: the major axis is the direction.
+        let half_trace = (sxx + syy) / 2.0;
+        let root = (((sxx - syy) / 2.0).powi(2) + sxy * sxy).sqrt();
+        let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+        Axis {
+            mean,
+            dir: Point2::new(angle.cos(), angle.sin()),
+            major_rms: ((half_trace + root) / n).sqrt(),
+            minor_rms: ((half_trace - root).max(0.0) / n).sqrt(),
+        }
+    }
+}
+
 /// The line through a track's box centres (total least squares), or `None` when the track is
 /// too short, travelled too little, or is not straight (see [`TrackOptions`]).
 pub fn fit_line(boxes: &[(f64, BoxPx)], track: &[usize], opts: &TrackOptions) -> Option<TrackLine> {
@@ -170,21 +204,9 @@ pub fn fit_line(boxes: &[(f64, BoxPx)], track: &[usize], opts: &TrackOptions) ->
         return None;
     }
     let centres: Vec<Point2> = track.iter().map(|&i| boxes[i].1.center()).collect();
-    let mean = centres.iter().fold(Point2::new(0.0, 0.0), |a, c| a + *c) / n as f64;
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for c in &centres {
-        let d = *c - mean;
-        sxx += d.x * d.x;
-        sxy += d.x * d.y;
-        syy += d.y * d.y;
-    }
-    // Eigen-decomposition of the 2x2 scatter matrix: the major axis is the direction.
-    let half_trace = (sxx + syy) / 2.0;
-    let root = (((sxx - syy) / 2.0).powi(2) + sxy * sxy).sqrt();
-    let minor = (half_trace - root).max(0.0);
-    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let dir = Point2::new(angle.cos(), angle.sin());
-    let rms = (minor / n as f64).sqrt();
+    let axis = Axis::of(&centres);
+    let (mean, dir) = (axis.mean, axis.dir);
+    let rms = axis.minor_rms;
     let travel = (centres[n - 1] - centres[0]).dot(dir).abs();
     let mut sizes: Vec<f64> = track
         .iter()
@@ -331,27 +353,14 @@ pub fn tangents(
         }
         for j in half..track.len() - half {
             let window = &track[j - half..=j + half];
-            let n = window.len() as f64;
             let centres: Vec<Point2> = window.iter().map(|&i| boxes[i].1.center()).collect();
-            let mean = centres
-                .iter()
-                .fold(Point2::new(0.0, 0.0), |a, c| a + *c / n);
-            let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-            for c in &centres {
-                let d = *c - mean;
-                sxx += d.x * d.x;
-                sxy += d.x * d.y;
-                syy += d.y * d.y;
-            }
-            let half_trace = (sxx + syy) / 2.0;
-            let root = (((sxx - syy) / 2.0).powi(2) + sxy * sxy).sqrt();
-            if ((half_trace + root) / n).sqrt() < min_spread_px {
+            let axis = Axis::of(&centres);
+            if axis.major_rms < min_spread_px {
                 continue;
             }
-            let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
             out[track[j]] = Some(Tangent {
                 point: boxes[track[j]].1.center(),
-                dir: Point2::new(angle.cos(), angle.sin()),
+                dir: axis.dir,
             });
         }
     }
