@@ -468,11 +468,12 @@ impl CurvedFlat {
         let mut c = 0.0;
         for (g, (t, range)) in self.tangent.iter().zip(&self.range).enumerate() {
             let w = gw[g];
-            let tn = t.dir.dot(n);
-            if w == 0.0 || tn.abs() < 1e-9 {
+            if w == 0.0 {
                 continue;
             }
-            let vp1 = t.point + t.dir * (-(t.point - h0).dot(n) / tn);
+            let Some(vp1) = meets_horizon(t, h0, n) else {
+                continue;
+            };
             let a = vp1 - pp;
             let u = -a.dot(h) / (f2 + a.dot(a));
             for i in range.clone() {
@@ -493,6 +494,13 @@ impl CurvedFlat {
         }
         c
     }
+}
+
+/// Where the line of tangent `t` meets the horizon through `h0` with unit normal `n` (the
+/// vehicle's own VP1); `None` when they are (nearly) parallel.
+fn meets_horizon(t: &Tangent, h0: Point2, n: Point2) -> Option<Point2> {
+    let tn = t.dir.dot(n);
+    (tn.abs() >= 1e-9).then(|| t.point + t.dir * (-(t.point - h0).dot(n) / tn))
 }
 
 /// The horizon and the focal length of a curved road, where every vehicle has its own
@@ -551,11 +559,8 @@ pub fn fit_curved(
     let along: Vec<f64> = full
         .tangent
         .iter()
-        .filter(|t| t.dir.dot(n).abs() > 1e-9)
-        .map(|t| {
-            let vp1 = t.point + t.dir * (-(t.point - h0).dot(n) / t.dir.dot(n));
-            (vp1 - h0).dot(h)
-        })
+        .filter_map(|t| meets_horizon(t, h0, n))
+        .map(|vp1| (vp1 - h0).dot(h))
         .filter(|a| a.is_finite())
         .collect();
     if along.is_empty() {

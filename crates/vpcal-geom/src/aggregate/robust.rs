@@ -1193,7 +1193,7 @@ pub fn aggregate_with_edgelets(
                 .collect();
             let straight = moving
                 .iter()
-                .filter(|l| l.rms <= t.max_rms_fraction * l.travel)
+                .filter(|l| l.is_straight(t))
                 .copied()
                 .collect();
             (moving, straight)

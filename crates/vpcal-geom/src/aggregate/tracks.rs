@@ -218,7 +218,7 @@ pub fn fit_line(boxes: &[(f64, BoxPx)], track: &[usize], opts: &TrackOptions) ->
     let ok = travel.is_finite()
         && travel > 0.0
         && travel >= opts.min_travel_boxes * size
-        && rms <= opts.max_rms_fraction * travel;
+        && straight_enough(rms, travel, opts);
     ok.then_some(TrackLine {
         point: mean,
         dir,
@@ -317,6 +317,18 @@ fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
         }
     }
     Some(inv)
+}
+
+impl TrackLine {
+    /// Whether the centres stayed close enough to the line to count as a straight drive
+    /// ([`TrackOptions::max_rms_fraction`]), as [`fit_line`] requires.
+    pub fn is_straight(&self, opts: &TrackOptions) -> bool {
+        straight_enough(self.rms, self.travel, opts)
+    }
+}
+
+fn straight_enough(rms: f64, travel: f64, opts: &TrackOptions) -> bool {
+    rms <= opts.max_rms_fraction * travel
 }
 
 /// Link `boxes` into tracks and return the lines of the tracks that qualify.
