@@ -130,6 +130,44 @@ fn motion_detector_finds_a_moving_car_and_hugs_it() {
 }
 
 #[test]
+fn motion_detector_replays_its_warm_up_frames_with_the_background_they_built() {
+    // The car drives from the first frame, so the whole of its pass falls in the warm-up
+    // (10 frames over 3 s): the main pass sees nothing of it, the replay finds it.
+    let mut scene = Scene { rng: 7 };
+    let frames: Vec<Frame> = (0..90u64).map(|k| scene.frame(k, true, 0)).collect();
+    let mut det = MotionDetector::new(MotionConfig::default()).unwrap();
+    for frame in &frames {
+        let learning = det.learned_until().is_none();
+        assert_eq!(det.replay().is_some(), !learning, "frame {}", frame.index);
+        let dets = det.detect(frame).unwrap();
+        if det.learned_until().is_none() {
+            assert!(dets.is_empty(), "frame {}: {dets:?}", frame.index);
+        }
+    }
+    let until = det.learned_until().expect("the warm-up ended");
+    assert!((60..=80).contains(&until), "warm-up ended at frame {until}");
+    let mut replay = det.replay().expect("a replay detector");
+    assert_eq!(
+        replay.learned_until(),
+        None,
+        "the replay learns nothing new"
+    );
+    let (mut hits, mut visible) = (0, 0);
+    for frame in frames.iter().take_while(|f| f.index < until) {
+        let dets = replay.detect(frame).unwrap();
+        let truth = Scene::car_box(frame.index);
+        assert!(dets.len() <= 1, "frame {}: {dets:?}", frame.index);
+        if truth.x1 > 630.0 {
+            continue;
+        }
+        visible += 1;
+        hits += usize::from(dets.iter().any(|d| iou(&d.bbox, &truth) > 0.75));
+    }
+    assert!(visible > 50, "{visible}");
+    assert!(hits as f64 >= 0.9 * visible as f64, "{hits} of {visible}");
+}
+
+#[test]
 fn motion_detector_ignores_global_brightness_and_masked_areas() {
     // A sudden exposure change of +30 on every pixel is not motion.
     let mut scene = Scene { rng: 2 };

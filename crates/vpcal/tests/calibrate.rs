@@ -47,11 +47,22 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
     assert_eq!(calib["format"], "vpcal-calibration/1");
     assert_eq!(calib["image_size"], serde_json::json!([320, 240]));
     assert_eq!(calib["input"]["frames_processed"], 200);
+    // The motion detector's warm-up (3 s) is looked at again once its background is built;
+    // those frames' vehicles come first in the records.
+    let replayed = calib["input"]["frames_replayed"].as_u64().unwrap();
+    assert!((30..200).contains(&replayed), "{replayed}");
     // Every kept box became one vehicle record (VPout JSON, with Infinity/NaN tokens).
     let vehicles = vpcal_formats::reference::read_vpout(&out.path().join("vehicles.json")).unwrap();
     assert_eq!(
         vehicles.len() as u64,
         calib["input"]["vehicle_boxes"].as_u64().unwrap()
+    );
+    assert!(vehicles
+        .windows(2)
+        .all(|w| w[0].frame_cnt <= w[1].frame_cnt));
+    assert!(
+        vehicles.iter().any(|v| v.frame_cnt < replayed as f64),
+        "no vehicle in the replayed frames"
     );
     if code == 0 {
         assert_eq!(calib["status"], "calibrated");

@@ -42,6 +42,20 @@ pub trait Detector: Send {
 
     /// A short name for logs and for the settings recorded with results.
     fn name(&self) -> String;
+
+    /// The frames before this index (source index) only taught the detector (a motion
+    /// detector's warm-up builds its background from them) and gave no detections. `None`
+    /// when the detector needs no such frames or is still learning.
+    fn learned_until(&self) -> Option<u64> {
+        None
+    }
+
+    /// A detector for a second look at the frames before [`Detector::learned_until`], with
+    /// what was learned from them; feed it those frames in stream order. `None` when there is
+    /// nothing to look at again.
+    fn replay(&self) -> Option<Box<dyn Detector>> {
+        None
+    }
 }
 
 /// Intersection over union of two boxes (0 when either is empty).

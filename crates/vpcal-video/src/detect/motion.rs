@@ -5,7 +5,8 @@
 //!
 //! 1. **Warm-up.** The first `warmup_frames` frames only build the model: the background is
 //!    their per-pixel, per-channel median (vehicles passing by are outvoted). Warm-up frames
-//!    give no detections, except the last one.
+//!    give no detections, except the last one; [`Detector::replay`] gives a detector that
+//!    starts from the background just built, for a second look at them (3 s of a 6-s clip).
 //! 2. **Foreground.** A pixel `I` is foreground when its RGB distance `d = |I − B|` from the
 //!    background `B` exceeds `max(min_difference, noise_factor · median(d))`, the median taken
 //!    over the road (most of the road is empty in any frame, so the median measures sensor and
@@ -148,7 +149,7 @@ pub fn load_road_mask(path: &Path) -> Result<GrayImage> {
 }
 
 /// Model state once the frame size is known.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct Model {
     frame_w: u32,
     frame_h: u32,
@@ -179,6 +180,9 @@ pub struct MotionDetector {
     work: Vec<u8>,
     frames_seen: u64,
     last_foreground: Option<GrayImage>,
+    /// The model as the warm-up left it, and the index of the frame that ended the warm-up:
+    /// what [`Detector::replay`] starts from.
+    learned: Option<(Model, u64)>,
 }
 
 impl MotionDetector {
@@ -214,6 +218,7 @@ impl MotionDetector {
             work: Vec::new(),
             frames_seen: 0,
             last_foreground: None,
+            learned: None,
         })
     }
 
@@ -344,6 +349,7 @@ impl MotionDetector {
                 return Ok(Vec::new());
             }
             init_background(model);
+            self.learned = Some((model.clone(), frame.index));
         }
         let n = w as usize * h as usize;
         let dt = model.last_time_s.map_or(0.0, |t| {
@@ -729,6 +735,27 @@ impl Detector for MotionDetector {
 
     fn name(&self) -> String {
         "motion".to_string()
+    }
+
+    fn learned_until(&self) -> Option<u64> {
+        self.learned.as_ref().map(|(_, index)| *index)
+    }
+
+    /// A detector whose background is the one the warm-up built (not the one it has become
+    /// since) and whose clock starts afresh, so the warm-up frames can be run through it in
+    /// their order.
+    fn replay(&self) -> Option<Box<dyn Detector>> {
+        let (model, _) = self.learned.as_ref()?;
+        Some(Box::new(MotionDetector {
+            config: self.config.clone(),
+            road_mask: None,
+            model: Some(model.clone()),
+            resizer: fir::Resizer::new(),
+            work: Vec::new(),
+            frames_seen: 0,
+            last_foreground: None,
+            learned: None,
+        }))
     }
 }
 

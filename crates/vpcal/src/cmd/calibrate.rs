@@ -31,7 +31,7 @@ use vpcal_video::crop::{CropFilter, CropResizer};
 use vpcal_video::detect::{FileDetector, MotionConfig, MotionDetector};
 use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
 use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
-use vpcal_video::{Detector, SourceInfo, SourceOptions, Start};
+use vpcal_video::{Detector, Frame, SourceInfo, SourceOptions, Start};
 
 use super::aggregate::{aggregate, Aggregated, Method};
 use super::args;
@@ -93,6 +93,11 @@ pub struct PipelineArgs {
     /// alone.
     #[arg(long)]
     pub no_edgelets: bool,
+    /// Do not look again at the frames the motion detector spent building its background (by
+    /// default the input is read a second time for them once the background is known: the
+    /// first 3 seconds would otherwise give no vehicles).
+    #[arg(long)]
+    pub no_replay: bool,
     /// Process every K-th frame.
     #[arg(long, default_value_t = 1, value_name = "K")]
     pub every: u64,
@@ -218,6 +223,8 @@ impl VehicleRecord {
 #[derive(Debug, Clone, Default)]
 pub struct PipelineStats {
     pub frames: u64,
+    /// Frames looked at a second time, after the detector's warm-up (see [`run_pipeline`]).
+    pub replayed_frames: u64,
     pub detections: u64,
     pub dropped_low_score: u64,
     pub dropped_static: u64,
@@ -312,7 +319,137 @@ impl EdgeletBudget {
 /// A crop waiting for its batch: frame, score, crop box, edgelets in the box.
 type Pending = (u64, f32, BoxPx, Vec<Edgelet>);
 
+/// Everything after the detector: filter, crops, edgelets, batched network, records.
+struct Stages<'a> {
+    net: &'a VpNet,
+    a: &'a PipelineArgs,
+    resizer: CropResizer,
+    crop_len: usize,
+    /// Crops waiting for a full batch, and their (frame, score, box, edgelets).
+    pending: Vec<f32>,
+    pending_meta: Vec<Pending>,
+    records: Vec<VehicleRecord>,
+    budget: EdgeletBudget,
+    edgelet_options: EdgeletOptions,
+    gate: EdgeletFitOptions,
+    stats: PipelineStats,
+}
+
+impl<'a> Stages<'a> {
+    fn new(net: &'a VpNet, a: &'a PipelineArgs) -> Result<Stages<'a>> {
+        let resizer = CropResizer::new(net.config().input_size as u32, CropFilter::default())?;
+        let crop_len = resizer.crop_len();
+        Ok(Stages {
+            net,
+            a,
+            resizer,
+            crop_len,
+            pending: Vec::with_capacity(a.batch * crop_len),
+            pending_meta: Vec::with_capacity(a.batch),
+            records: Vec::new(),
+            budget: EdgeletBudget::new(4096),
+            edgelet_options: EdgeletOptions::default(),
+            gate: EdgeletFitOptions::default(),
+            stats: PipelineStats::default(),
+        })
+    }
+
+    /// The per-frame filter (each pass over the frames gets its own: it compares a frame's
+    /// boxes with the previous frame's).
+    fn filter(&self) -> FrameFilter {
+        FrameFilter::new(FilterConfig {
+            min_score: Some(self.a.min_score as f32),
+            drop_static: !self.a.keep_static,
+            max_per_frame: (self.a.max_per_frame > 0).then_some(self.a.max_per_frame),
+            ..FilterConfig::default()
+        })
+    }
+
+    /// Detect, filter and crop the vehicles of one frame; full batches go through the network.
+    fn frame(
+        &mut self,
+        frame: &Frame,
+        detector: &mut dyn Detector,
+        filter: &mut FrameFilter,
+    ) -> Result<()> {
+        let dets = detector
+            .detect(frame)
+            .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
+        self.stats.detections += dets.len() as u64;
+        let filtered = filter.apply(frame, dets);
+        for (_, why) in &filtered.dropped {
+            match why {
+                DropReason::LowScore => self.stats.dropped_low_score += 1,
+                DropReason::Static => self.stats.dropped_static += 1,
+                DropReason::OverLimit => self.stats.dropped_over_limit += 1,
+                DropReason::OutsideFrame => self.stats.dropped_outside += 1,
+            }
+        }
+        if filtered.kept.is_empty() {
+            return Ok(());
+        }
+        let boxes: Vec<BoxPx> = filtered.kept.iter().map(|d| d.bbox).collect();
+        let batch = self.resizer.crop_batch(&frame.image, &boxes)?;
+        let len = self.crop_len;
+        for (k, (&src, &bp)) in batch.source.iter().zip(&batch.boxes).enumerate() {
+            self.pending
+                .extend_from_slice(&batch.images[k * len..(k + 1) * len]);
+            let index = self.records.len() + self.pending_meta.len();
+            let edgelets = if self.a.no_edgelets || !self.budget.keeps(index) {
+                Vec::new()
+            } else {
+                edgelets_in_box(&frame.image, &bp, &self.edgelet_options)
+            };
+            self.pending_meta
+                .push((frame.index, filtered.kept[src].score, bp, edgelets));
+            self.stats.crops += 1;
+            if self.pending_meta.len() >= self.a.batch {
+                self.flush()?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Run the waiting crops through the network and keep their records.
+    fn flush(&mut self) -> Result<()> {
+        if self.pending_meta.is_empty() {
+            return Ok(());
+        }
+        let preds = self.net.predict_prepared(&self.pending)?;
+        for ((frame, score, crop_box, edgelets), p) in self.pending_meta.drain(..).zip(preds) {
+            let prediction = p.vp;
+            let vp1 = crop_box.frame_from_box(prediction.vp1);
+            let vp2 = crop_box.frame_from_box(prediction.vp2);
+            // Only the edgelets near the network's VP rays are kept (memory).
+            let edgelets = near_rays(
+                crop_box.center(),
+                vp1,
+                vp2,
+                &edgelets,
+                self.gate.gate_vp2_deg,
+                self.gate.max_per_vehicle,
+            );
+            self.records.push(VehicleRecord {
+                frame,
+                score,
+                crop_box,
+                vp1,
+                vp2,
+                prediction,
+                edgelets,
+            });
+            self.budget.pushed(&mut self.records, |r| &mut r.edgelets);
+        }
+        self.pending.clear();
+        Ok(())
+    }
+}
+
 /// Run frames -> detections -> filter -> crops -> network, returning per-vehicle records.
+///
+/// A detector that spends the first frames learning (the motion detector's warm-up) gets a
+/// second look at them once the main pass is done: the input is opened again and those
+/// frames go through [`Detector::replay`] (unless `--no-replay`).
 pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     if a.batch == 0 {
         bail!("--batch must be at least 1");
@@ -333,126 +470,84 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     let info = source.info().clone();
     let mut detector = open_detector(a, &info)?;
     let detector_name = detector.name();
-    let mut filter = FrameFilter::new(FilterConfig {
-        min_score: Some(a.min_score as f32),
-        drop_static: !a.keep_static,
-        max_per_frame: (a.max_per_frame > 0).then_some(a.max_per_frame),
-        ..FilterConfig::default()
-    });
-    let mut resizer = CropResizer::new(net.config().input_size as u32, CropFilter::default())?;
-    let crop_len = resizer.crop_len();
+    let mut stages = Stages::new(&net, a)?;
+    let mut filter = stages.filter();
 
     let expected = info.expected_frames(&options);
     let pb = super::progress_bar(expected, "frames", a.quiet);
     let t0 = Instant::now();
-    let mut stats = PipelineStats::default();
-    let mut records: Vec<VehicleRecord> = Vec::new();
-    // Crops waiting for a full batch, with (frame, score, box).
-    let mut pending: Vec<f32> = Vec::with_capacity(a.batch * crop_len);
-    let mut pending_meta: Vec<Pending> = Vec::with_capacity(a.batch);
     let mut last_frame: Option<RgbImage> = None;
-    let edgelet_options = EdgeletOptions::default();
-    let gate = EdgeletFitOptions::default();
-    let mut budget = EdgeletBudget::new(4096);
-    let flush = |pending: &mut Vec<f32>,
-                 meta: &mut Vec<Pending>,
-                 records: &mut Vec<VehicleRecord>,
-                 budget: &mut EdgeletBudget|
-     -> Result<()> {
-        if meta.is_empty() {
-            return Ok(());
-        }
-        let preds = net.predict_prepared(pending)?;
-        for ((frame, score, crop_box, edgelets), p) in meta.drain(..).zip(preds) {
-            let prediction = p.vp;
-            let vp1 = crop_box.frame_from_box(prediction.vp1);
-            let vp2 = crop_box.frame_from_box(prediction.vp2);
-            // Only the edgelets near the network's VP rays are kept (memory).
-            let edgelets = near_rays(
-                crop_box.center(),
-                vp1,
-                vp2,
-                &edgelets,
-                gate.gate_vp2_deg,
-                gate.max_per_vehicle,
-            );
-            records.push(VehicleRecord {
-                frame,
-                score,
-                crop_box,
-                vp1,
-                vp2,
-                prediction,
-                edgelets,
-            });
-            budget.pushed(records, |r| &mut r.edgelets);
-        }
-        pending.clear();
-        Ok(())
+    // Frames of the main pass that only taught the detector.
+    let mut learning_frames = 0u64;
+    let progress = |pb: &indicatif::ProgressBar, stages: &Stages| {
+        pb.inc(1);
+        let secs = t0.elapsed().as_secs_f64().max(1e-9);
+        let s = &stages.stats;
+        pb.set_message(format!(
+            "{:.1} frames/s, {} vehicle boxes",
+            (s.frames + s.replayed_frames) as f64 / secs,
+            s.crops
+        ));
     };
     for frame in source.by_ref() {
         let frame = frame.with_context(|| format!("reading {}", input.display()))?;
-        stats.frames += 1;
-        let dets = detector
-            .detect(&frame)
-            .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
-        stats.detections += dets.len() as u64;
-        let filtered = filter.apply(&frame, dets);
-        for (_, why) in &filtered.dropped {
-            match why {
-                DropReason::LowScore => stats.dropped_low_score += 1,
-                DropReason::Static => stats.dropped_static += 1,
-                DropReason::OverLimit => stats.dropped_over_limit += 1,
-                DropReason::OutsideFrame => stats.dropped_outside += 1,
-            }
+        stages.stats.frames += 1;
+        stages.frame(&frame, detector.as_mut(), &mut filter)?;
+        if detector
+            .learned_until()
+            .is_none_or(|until| frame.index < until)
+        {
+            learning_frames += 1;
         }
-        if !filtered.kept.is_empty() {
-            let boxes: Vec<BoxPx> = filtered.kept.iter().map(|d| d.bbox).collect();
-            let batch = resizer.crop_batch(&frame.image, &boxes)?;
-            for (k, (&src, &bp)) in batch.source.iter().zip(&batch.boxes).enumerate() {
-                pending.extend_from_slice(&batch.images[k * crop_len..(k + 1) * crop_len]);
-                let edgelets = if a.no_edgelets || !budget.keeps(records.len() + pending_meta.len())
-                {
-                    Vec::new()
-                } else {
-                    edgelets_in_box(&frame.image, &bp, &edgelet_options)
-                };
-                pending_meta.push((frame.index, filtered.kept[src].score, bp, edgelets));
-                stats.crops += 1;
-                if pending_meta.len() >= a.batch {
-                    flush(&mut pending, &mut pending_meta, &mut records, &mut budget)?;
-                }
-            }
-        }
-        pb.inc(1);
-        let secs = t0.elapsed().as_secs_f64().max(1e-9);
-        pb.set_message(format!(
-            "{:.1} frames/s, {} vehicle boxes",
-            stats.frames as f64 / secs,
-            stats.crops
-        ));
+        progress(&pb, &stages);
         last_frame = Some(frame.image);
     }
-    flush(&mut pending, &mut pending_meta, &mut records, &mut budget)?;
-    pb.finish_and_clear();
     for w in source.warnings() {
         eprintln!("warning: {}: {w}", input.display());
     }
+    drop(source);
+    let replay = match (detector.learned_until(), detector.replay()) {
+        (Some(until), Some(replay)) if !a.no_replay && learning_frames > 0 => Some((until, replay)),
+        _ => None,
+    };
+    if let Some((until, mut replay)) = replay {
+        pb.inc_length(learning_frames);
+        let mut source = vpcal_video::open_source(input, &options)
+            .with_context(|| format!("opening {} again", input.display()))?;
+        let mut filter = stages.filter();
+        for frame in source.by_ref() {
+            let frame = frame.with_context(|| format!("reading {}", input.display()))?;
+            if frame.index >= until {
+                break;
+            }
+            stages.stats.replayed_frames += 1;
+            stages.frame(&frame, replay.as_mut(), &mut filter)?;
+            progress(&pb, &stages);
+        }
+    }
+    stages.flush()?;
+    pb.finish_and_clear();
+    let Stages {
+        mut records,
+        mut stats,
+        ..
+    } = stages;
     if stats.frames == 0 {
         bail!(
             "{}: no frames to process (empty input, or --start/--max-frames select none)",
             input.display()
         );
     }
+    // The replayed frames come first in the stream.
+    records.sort_by_key(|r| r.frame);
     stats.seconds = t0.elapsed().as_secs_f64();
-    let picture = last_frame;
     Ok(PipelineOutput {
         info,
         detector: detector_name,
         model,
         records,
         stats,
-        picture,
+        picture: last_frame,
     })
 }
 
@@ -556,6 +651,7 @@ fn input_json(out: &PipelineOutput) -> Value {
         "fps": out.info.fps,
         "codec": out.info.codec,
         "frames_processed": out.stats.frames,
+        "frames_replayed": out.stats.replayed_frames,
         "detections": out.stats.detections,
         "dropped": {
             "low_score": out.stats.dropped_low_score,
@@ -581,6 +677,7 @@ fn settings_json(out: &PipelineOutput, a: &PipelineArgs) -> Value {
         "max_per_frame": a.max_per_frame,
         "method": a.method.name(),
         "flip_average": a.flip_average,
+        "replay": !a.no_replay,
         "bootstrap": a.bootstrap,
         "pp": a.pp.map(pt),
     })
@@ -616,12 +713,20 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
     row(
         "frames",
         format!(
-            "{} processed ({}x{}) in {:.1} s, {:.1} frames/s",
+            "{} processed ({}x{}){} in {:.1} s, {:.1} frames/s",
             s.frames,
             out.info.width,
             out.info.height,
+            if s.replayed_frames > 0 {
+                format!(
+                    ", {} of them again after the detector's warm-up",
+                    s.replayed_frames
+                )
+            } else {
+                String::new()
+            },
             s.seconds,
-            s.frames as f64 / s.seconds.max(1e-9)
+            (s.frames + s.replayed_frames) as f64 / s.seconds.max(1e-9)
         ),
     );
     row("detector", out.detector.clone());
