@@ -2,7 +2,7 @@
 //! Linking boxes into tracks and fitting their VP1 lines.
 
 use proptest::prelude::*;
-use vpcal_geom::aggregate::tracks::{fit_line, link, track_lines, TrackOptions};
+use vpcal_geom::aggregate::tracks::{fit_line, link, tangents, track_lines, TrackOptions};
 use vpcal_geom::{BoxPx, Point2};
 
 /// A box of half size `half` (aspect 0.7) centred on `c`.
@@ -183,4 +183,30 @@ fn a_track_on_a_curve_bends_significantly_and_a_noisy_straight_one_does_not() {
     // Mirror images bend to opposite sides of the same direction.
     let s = right.dir.dot(left.dir).signum();
     assert!(right.bend_t * left.bend_t * s < 0.0, "{right:?} {left:?}");
+}
+
+#[test]
+fn a_tangent_knows_its_error_from_the_boxes_jitter() {
+    // One car, 30 boxes 10 px apart along x; exact centres, then centres jittering 2 px up and
+    // down. The window (4 boxes either side: 9 centres, RMS spread 25.8 px along the axis)
+    // turns that jitter into a slope error of about 2 / (25.8 sqrt 7) rad = 1.7°.
+    let track: Vec<usize> = (0..30).collect();
+    for (jitter, lo, hi) in [(0.0, 0.0, 1e-9), (2.0, 1.2, 2.2)] {
+        let boxes: Vec<(f64, BoxPx)> = (0..30)
+            .map(|k| {
+                let y = 300.0 + if k % 2 == 0 { jitter } else { -jitter };
+                (
+                    k as f64,
+                    box_at(Point2::new(100.0 + 10.0 * k as f64, y), 30.0),
+                )
+            })
+            .collect();
+        let t = tangents(&boxes, std::slice::from_ref(&track), 4, 3.0);
+        assert!(t[..4].iter().chain(&t[26..]).all(Option::is_none));
+        for tangent in t[4..26].iter().map(|t| t.unwrap()) {
+            let se = tangent.se_rad.to_degrees();
+            assert!((lo..=hi).contains(&se), "jitter {jitter}: se {se}°");
+            assert!(tangent.dir.y.abs() < 0.05, "{:?}", tangent.dir);
+        }
+    }
 }

@@ -496,6 +496,20 @@ impl CurvedFlat {
     }
 }
 
+/// A vehicle's weight in [`fit_curved`]: `1 / (1 + (se / s)^2)` for a tangent whose direction
+/// has standard error `se` and an edgelet scale `s` (both radians). Exact boxes give tangents
+/// good to a few tenths of a degree (weight near 1); the motion detector's boxes jitter, and a
+/// tangent over a short stretch of a slow car can be several degrees off, which moves that
+/// car's VP1 along the horizon and pulls the fit with all its edgelets.
+fn tangent_weight(t: &Tangent, s: f64) -> f64 {
+    let r = t.se_rad / s;
+    if r.is_finite() {
+        1.0 / (1.0 + r * r)
+    } else {
+        0.0
+    }
+}
+
 /// Where the line of tangent `t` meets the horizon through `h0` with unit normal `n` (the
 /// vehicle's own VP1); `None` when they are (nearly) parallel.
 fn meets_horizon(t: &Tangent, h0: Point2, n: Point2) -> Option<Point2> {
@@ -508,7 +522,7 @@ fn meets_horizon(t: &Tangent, h0: Point2, n: Point2) -> Option<Point2> {
 /// edgelets point at that VP1, at the VP2 orthogonal to it, or at VP3. Three parameters
 /// (ln f, roll, the horizon's height at `pp.x`), from a grid (around `roll0`, on at most
 /// 2000 edgelets) refined by Nelder-Mead on up to `max_edgelets`, with a bootstrap over
-/// vehicles. `None` with fewer than `min_vehicles` vehicles or `min_edgelets` edgelets.
+/// vehicles; each vehicle weighs by how well its tangent is known ([`tangent_weight`]). `None` with fewer than `min_vehicles` vehicles or `min_edgelets` edgelets.
 pub fn fit_curved(
     pp: Point2,
     width: f64,
@@ -525,7 +539,11 @@ pub fn fit_curved(
     let coarse = CurvedFlat::new(vehicles, 2000);
     let s = opts.scale_deg.to_radians();
     let ex1 = opts.exclude_vp1_deg.to_radians();
-    let ones = vec![1.0; full.tangent.len()];
+    let weights = |flat: &CurvedFlat| -> Vec<f64> {
+        flat.tangent.iter().map(|t| tangent_weight(t, s)).collect()
+    };
+    let weight = weights(&full);
+    let coarse_weight = weights(&coarse);
     let (lo, hi) = ((0.3 * width).ln(), (10.0 * width).ln());
     let mut best = (f64::INFINITY, [0.0; 3]);
     for i in 0..16 {
@@ -535,7 +553,7 @@ pub fn fit_curved(
             for k in 0..40 {
                 let y0 = pp.y - 3.0 * height * (1.0 - f64::from(k) / 40.0);
                 let x = [ln_f, roll, y0];
-                let c = coarse.cost(&ones[..coarse.tangent.len()], pp, &x, s, ex1);
+                let c = coarse.cost(&coarse_weight, pp, &x, s, ex1);
                 if c < best.0 {
                     best = (c, x);
                 }
@@ -543,11 +561,11 @@ pub fn fit_curved(
         }
     }
     let step0 = [0.05, 0.3f64.to_radians(), 0.01 * height];
-    let x = nelder_mead(|x| full.cost(&ones, pp, x, s, ex1), &best.1, &step0, 400);
+    let x = nelder_mead(|x| full.cost(&weight, pp, x, s, ex1), &best.1, &step0, 400);
     let mut rng = SplitMix(seed ^ 0xC0C0_1E75);
     let (mut fs, mut rolls) = (vec![], vec![]);
     for _ in 0..opts.bootstrap.min(10) {
-        let w: Vec<f64> = (0..coarse.tangent.len()).map(|_| rng.poisson1()).collect();
+        let w: Vec<f64> = coarse_weight.iter().map(|cw| cw * rng.poisson1()).collect();
         let xb = nelder_mead(|x| coarse.cost(&w, pp, x, s, ex1), &x, &step0, 150);
         fs.push(xb[0].exp());
         rolls.push(line_angle_diff(xb[1] - x[1]).to_degrees());

@@ -345,11 +345,14 @@ pub struct Tangent {
     pub point: Point2,
     /// Unit direction.
     pub dir: Point2,
+    /// Standard error of the direction, radians, from the scatter of the window's centres
+    /// across the axis (the boxes' jitter) against their spread along it.
+    pub se_rad: f64,
 }
 
 /// Per box (indexed like `boxes`), the direction its track runs at that box: the major axis
 /// of the centres of the `half` boxes before and after it in its track (total least
-/// squares). `None` for boxes without `half` neighbours on both sides, or whose neighbours
+/// squares), and that direction's standard error. `None` for boxes without `half` neighbours on both sides, or whose neighbours
 /// moved less than `min_spread_px` (RMS along the axis). On a curved road each car has its own
 /// heading; these tangents follow it, where a line through the whole track does not.
 pub fn tangents(
@@ -373,6 +376,9 @@ pub fn tangents(
             out[track[j]] = Some(Tangent {
                 point: boxes[track[j]].1.center(),
                 dir: axis.dir,
+                // The slope error of a line fit: scatter across over spread along, sqrt(n - 2).
+                se_rad: axis.minor_rms
+                    / (axis.major_rms * (window.len() as f64 - 2.0).max(1.0).sqrt()),
             });
         }
     }
