@@ -649,6 +649,24 @@ fn curved_fit_errors(scene: &Scene, fit: &CurvedFit) -> (f64, f64, f64) {
     (angle, dy, fit.focal_px / scene.f - 1.0)
 }
 
+/// The curved fit of `cars` on a 1920x1080 image, roll grid around 0.
+fn fit_cars(
+    scene: &Scene,
+    cars: &[(Tangent, Vec<Edgelet>)],
+    opts: &EdgeletFitOptions,
+) -> CurvedFit {
+    fit_curved(
+        scene.pp,
+        1920.0,
+        1080.0,
+        &curved_vehicles(cars),
+        0.0,
+        opts,
+        5,
+    )
+    .unwrap()
+}
+
 fn curved_vehicles(cars: &[(Tangent, Vec<Edgelet>)]) -> Vec<CurvedVehicle<'_>> {
     cars.iter()
         .map(|(t, e)| CurvedVehicle {
@@ -686,30 +704,12 @@ fn tangents_known_to_be_poor_weigh_little_in_the_curved_fit() {
         let a = t.dir.y.atan2(t.dir.x) + turn;
         t.dir = Point2::new(a.cos(), a.sin());
     }
-    let unweighted = fit_curved(
-        scene.pp,
-        1920.0,
-        1080.0,
-        &curved_vehicles(&cars),
-        0.0,
-        &opts,
-        5,
-    )
-    .unwrap();
+    let unweighted = fit_cars(&scene, &cars, &opts);
     let (angle_u, dy_u, df_u) = curved_fit_errors(&scene, &unweighted);
     for (t, _) in cars.iter_mut().step_by(3) {
         t.se_rad = turn;
     }
-    let fit = fit_curved(
-        scene.pp,
-        1920.0,
-        1080.0,
-        &curved_vehicles(&cars),
-        0.0,
-        &opts,
-        5,
-    )
-    .unwrap();
+    let fit = fit_cars(&scene, &cars, &opts);
     let (angle, dy, df) = curved_fit_errors(&scene, &fit);
     eprintln!("unweighted: {angle_u:.3}° {dy_u:.1} px {df_u:+.4}; weighted: {angle:.3}° {dy:.1} px {df:+.4}");
     assert!(
