@@ -201,6 +201,22 @@ fn cost(flat: &Flat, gw: &[f64], vp1: Point2, pp: Point2, x: &[f64], s: f64) -> 
     c
 }
 
+/// The 16th and 84th percentiles of a bootstrap's focal lengths and the standard deviation of
+/// its rolls (degrees); NaN where there were no resamples.
+fn bootstrap_spread(fs: Vec<f64>, rolls: &[f64]) -> (f64, f64, f64) {
+    let (p16, p84) = if fs.is_empty() {
+        (f64::NAN, f64::NAN)
+    } else {
+        (percentile(fs.clone(), 16.0), percentile(fs, 84.0))
+    };
+    let roll_sd = if rolls.is_empty() {
+        f64::NAN
+    } else {
+        sd(rolls)
+    };
+    (p16, p84, roll_sd)
+}
+
 /// Fit `(f, roll)` to the vehicles' edgelets near their VP2 rays with VP1 fixed; `roll0`
 /// (radians) centres the roll grid and `width` scales the focal grid. `None` when there are
 /// too few vehicles or edgelets after removing those that point at VP1.
@@ -286,16 +302,7 @@ pub fn fit(
     let (h, u) = vp2_direction(vp1, pp, x[0], x[1]);
     let vp2 = vp1 + h / u;
     let focal_px = x[0].exp();
-    let (p16, p84) = if fs.is_empty() {
-        (f64::NAN, f64::NAN)
-    } else {
-        (percentile(fs.clone(), 16.0), percentile(fs, 84.0))
-    };
-    let roll_sd_deg = if rolls.is_empty() {
-        f64::NAN
-    } else {
-        sd(&rolls)
-    };
+    let (p16, p84, roll_sd_deg) = bootstrap_spread(fs, &rolls);
     let roll_usable = roll_sd_deg <= opts.max_roll_sd_deg;
     let focal_usable = roll_usable
         && 0.5 * (p84 / p16).ln() <= opts.max_focal_log_spread
@@ -587,11 +594,7 @@ pub fn fit_curved(
     let vp1 = h0 + h * percentile(along, 50.0);
     let (hd, u) = vp2_direction(vp1, pp, x[0], x[1]);
     let vp2 = vp1 + hd / u;
-    let (p16, p84) = if fs.is_empty() {
-        (f64::NAN, f64::NAN)
-    } else {
-        (percentile(fs.clone(), 16.0), percentile(fs, 84.0))
-    };
+    let (p16, p84, roll_sd_deg) = bootstrap_spread(fs, &rolls);
     // A fit that left the grid's range of focal lengths or rolls found no curve's camera.
     let inside =
         (lo..=hi).contains(&x[0]) && line_angle_diff(x[1] - roll0).abs() <= 8f64.to_radians();
@@ -602,11 +605,7 @@ pub fn fit_curved(
         vp2,
         edgelets: full.point.len(),
         vehicles: full.tangent.len(),
-        roll_sd_deg: if rolls.is_empty() {
-            f64::NAN
-        } else {
-            sd(&rolls)
-        },
+        roll_sd_deg,
         focal_px_p16: p16,
         focal_px_p84: p84,
     })
