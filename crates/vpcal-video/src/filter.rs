@@ -11,7 +11,10 @@
 //!    ([`crate::crop::integer_box`]) exceeds 5: parked vehicles have unchanged edges. The
 //!    previous edge map is the one of the previous frame *given to the filter*, so the rule
 //!    compares frames `every` apart.
-//! 4. **At most `max_per_frame`** boxes (10), the best-scoring ones that passed.
+//! 4. **Seen before** (off by default; on for folders of stills, where the static rule cannot
+//!    work since the pictures are not consecutive frames): a box whose IoU with a box kept in
+//!    an earlier frame exceeds `drop_seen_iou` is the same parked vehicle again and counts once.
+//! 5. **At most `max_per_frame`** boxes (10), the best-scoring ones that passed.
 
 use image::GrayImage;
 
@@ -31,6 +34,8 @@ pub struct FilterConfig {
     pub static_threshold: f64,
     /// Canny thresholds (low, high).
     pub canny_thresholds: (f32, f32),
+    /// Drop a box whose IoU with a box kept in an earlier frame is above this.
+    pub drop_seen_iou: Option<f64>,
     /// Keep at most this many boxes per frame.
     pub max_per_frame: Option<usize>,
 }
@@ -42,6 +47,7 @@ impl Default for FilterConfig {
             drop_static: true,
             static_threshold: 5.0,
             canny_thresholds: (100.0, 200.0),
+            drop_seen_iou: None,
             max_per_frame: Some(10),
         }
     }
@@ -55,6 +61,8 @@ pub enum DropReason {
     OverLimit,
     /// The box does not overlap the frame.
     OutsideFrame,
+    /// A box kept in an earlier frame is at the same place (see [`FilterConfig::drop_seen_iou`]).
+    SeenBefore,
 }
 
 /// The outcome for one frame: kept boxes (best first) and dropped ones with the reason.
@@ -69,6 +77,8 @@ pub struct Filtered {
 pub struct FrameFilter {
     config: FilterConfig,
     prev_edges: Option<GrayImage>,
+    /// Boxes kept in earlier frames (only with `drop_seen_iou`).
+    seen: Vec<vpcal_geom::BoxPx>,
 }
 
 impl FrameFilter {
@@ -76,6 +86,7 @@ impl FrameFilter {
         FrameFilter {
             config,
             prev_edges: None,
+            seen: Vec::new(),
         }
     }
 
@@ -115,6 +126,7 @@ impl FrameFilter {
             None
         };
         let (w, h) = frame.image.dimensions();
+        let seen_before = self.seen.len();
         for d in candidates {
             if self
                 .config
@@ -140,6 +152,16 @@ impl FrameFilter {
                     out.dropped.push((d, DropReason::Static));
                     continue;
                 }
+            }
+            if let Some(t) = self.config.drop_seen_iou {
+                if self.seen[..seen_before]
+                    .iter()
+                    .any(|b| crate::detect::iou(b, &d.bbox) > t)
+                {
+                    out.dropped.push((d, DropReason::SeenBefore));
+                    continue;
+                }
+                self.seen.push(d.bbox);
             }
             out.kept.push(d);
         }
@@ -190,6 +212,34 @@ mod tests {
         );
         assert_eq!(r.kept.len(), 1);
         assert_eq!(r.dropped[0].1, DropReason::LowScore);
+    }
+
+    #[test]
+    fn a_parked_vehicle_in_many_stills_counts_once() {
+        let mut f = FrameFilter::new(FilterConfig {
+            drop_static: false,
+            drop_seen_iou: Some(0.7),
+            ..FilterConfig::default()
+        });
+        let d = |x: f64| Detection {
+            bbox: BoxPx::new(x, 10.0, x + 20.0, 30.0),
+            score: 0.9,
+        };
+        let frame = Frame {
+            index: 0,
+            time_s: 0.0,
+            image: image::RgbImage::from_pixel(300, 40, image::Rgb([30, 30, 30])),
+        };
+        let a = f.apply(&frame, vec![d(10.0), d(50.0)]);
+        assert_eq!(a.kept.len(), 2);
+        // Same places again (one box moved by a pixel), and a new vehicle.
+        let b = f.apply(&frame, vec![d(11.0), d(50.0), d(100.0)]);
+        assert_eq!(b.kept.len(), 1);
+        assert!((b.kept[0].bbox.x0 - 100.0).abs() < 1e-9);
+        assert!(b.dropped.iter().all(|(_, why)| *why == DropReason::SeenBefore));
+        // Two boxes of one frame never suppress each other through this rule.
+        let c = f.apply(&frame, vec![d(200.0), d(201.0)]);
+        assert_eq!(c.kept.len(), 2);
     }
 
     #[test]

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use image::{Rgb, RgbImage};
 use vpcal_video::detect::{Detector, OnnxConfig, OnnxDetector, OnnxLayout};
-use vpcal_video::{Frame, VideoError};
+use vpcal_video::{Detection, Frame, VideoError};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -107,4 +107,149 @@ fn a_file_that_is_not_onnx_is_refused() {
     let err =
         OnnxDetector::open(&dir.path().join("missing.onnx"), OnnxConfig::default()).unwrap_err();
     assert!(matches!(err, VideoError::Io { .. }), "{err}");
+}
+
+// ------------------------------------------------- the bundled YOLOX-nano against onnxruntime
+
+mod yolox {
+    use super::*;
+    use vpcal_video::detect::yolox::{
+        Region, YoloxConfig, YoloxDetector, BUNDLED_YOLOX, BUNDLED_YOLOX_SHA1,
+    };
+
+    fn data_dir() -> Option<PathBuf> {
+        let dir = std::env::var_os("VPCAL_DATA")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| {
+                PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"))
+            });
+        if dir.is_dir() {
+            Some(dir)
+        } else {
+            eprintln!("SKIP: no data at {}", dir.display());
+            None
+        }
+    }
+
+    fn golden() -> serde_json::Value {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/yolox.json");
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+    }
+
+    fn num(v: &serde_json::Value) -> f64 {
+        v.as_f64().unwrap()
+    }
+
+    /// Every golden case (scripts/yolox_goldens.py: onnxruntime on real frames, whole frames
+    /// and tiles) decodes to the same boxes: corners within 0.5 px, scores within 1e-4.
+    #[test]
+    fn bundled_yolox_matches_onnxruntime_on_real_frames() {
+        let Some(data) = data_dir() else { return };
+        let g = golden();
+        assert_eq!(g["model_sha1"].as_str(), Some(BUNDLED_YOLOX_SHA1));
+        let config = YoloxConfig {
+            classes: vec![2, 3, 5, 7],
+            min_score: num(&g["min_score"]) as f32,
+            nms_iou: num(&g["nms_iou"]),
+            ..YoloxConfig::default()
+        };
+        let det = YoloxDetector::bundled(config.clone()).unwrap();
+        assert_eq!(det.input_size(), 416);
+        let mut compared = 0;
+        let mut frames = std::collections::BTreeSet::new();
+        for case in g["cases"].as_array().unwrap() {
+            let rel = case["frame"].as_str().unwrap();
+            let img = image::open(data.join(rel)).unwrap().to_rgb8();
+            let r: Vec<u32> = case["region"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_u64().unwrap() as u32)
+                .collect();
+            let region = Region {
+                x0: r[0],
+                y0: r[1],
+                width: r[2],
+                height: r[3],
+            };
+            let (lb, cands) = det.candidates(&img, region).unwrap();
+            assert_eq!(
+                [lb.resized.0 as u64, lb.resized.1 as u64],
+                [case["resized"][0].as_u64().unwrap(), case["resized"][1].as_u64().unwrap()]
+            );
+            // The golden has no tile-border rule: map the region's candidates to the frame and
+            // suppress, as a whole-frame pass of that region would.
+            let dets: Vec<Detection> = cands
+                .iter()
+                .map(|c| Detection {
+                    bbox: lb.to_frame(c.bbox),
+                    score: c.score,
+                })
+                .collect();
+            let ours = vpcal_video::detect::non_max_suppression(dets, config.nms_iou);
+            let want = case["detections"].as_array().unwrap();
+            assert_eq!(ours.len(), want.len(), "{rel} {r:?}: {ours:?}");
+            for (o, w) in ours.iter().zip(want) {
+                let b = &w["box"];
+                let diffs = [
+                    (o.bbox.x0 - num(&b[0])).abs(),
+                    (o.bbox.y0 - num(&b[1])).abs(),
+                    (o.bbox.x1 - num(&b[2])).abs(),
+                    (o.bbox.y1 - num(&b[3])).abs(),
+                ];
+                assert!(diffs.iter().all(|d| *d < 0.5), "{rel} {r:?}: {o:?} vs {w}");
+                assert!(
+                    (f64::from(o.score) - num(&w["score"])).abs() < 1e-4,
+                    "{rel} {r:?}: {o:?} vs {w}"
+                );
+                compared += 1;
+            }
+            frames.insert(rel.to_string());
+        }
+        assert!(frames.len() >= 2 && compared >= 10, "{frames:?} {compared}");
+    }
+
+    #[test]
+    fn a_damaged_model_file_is_refused_with_its_sha1() {
+        let mut bytes = BUNDLED_YOLOX.to_vec();
+        bytes[1000] ^= 0xff;
+        let e = YoloxDetector::from_bytes(&bytes, "damaged.onnx", Some(BUNDLED_YOLOX_SHA1), YoloxConfig::default())
+            .unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("SHA-1") && msg.contains(BUNDLED_YOLOX_SHA1) && msg.contains("damaged.onnx"), "{msg}");
+        // Without the check, a truncated file is not a readable model.
+        let e = YoloxDetector::from_bytes(&bytes[..5000], "cut.onnx", None, YoloxConfig::default())
+            .unwrap_err();
+        assert!(matches!(e, VideoError::Model { .. }), "{e}");
+    }
+
+    #[test]
+    fn a_model_of_another_layout_is_refused() {
+        let e = YoloxDetector::open(&fixture("tiny_yolo.onnx"), YoloxConfig::default()).unwrap_err();
+        assert!(matches!(e, VideoError::Model { .. }), "{e}");
+    }
+
+    #[test]
+    fn the_bundled_detector_finds_the_cars_of_a_real_frame_with_tiles() {
+        let Some(data) = data_dir() else { return };
+        let img = image::open(data.join("bcs/dataset/session0_center/screen.png"))
+            .unwrap()
+            .to_rgb8();
+        let frame = Frame {
+            index: 0,
+            time_s: 0.0,
+            image: img,
+        };
+        let mut whole = YoloxDetector::bundled(YoloxConfig::default()).unwrap();
+        let mut tiled = YoloxDetector::bundled(YoloxConfig {
+            tiles: 2,
+            ..YoloxConfig::default()
+        })
+        .unwrap();
+        let a = whole.detect(&frame).unwrap();
+        let b = tiled.detect(&frame).unwrap();
+        assert!(!a.is_empty());
+        assert!(b.len() >= a.len(), "tiles {} < whole frame {}", b.len(), a.len());
+        assert!(tiled.name().contains("tiles"));
+    }
 }

@@ -24,6 +24,8 @@ enum Command {
     Calibrate(cmd::calibrate::Args),
     /// Render a synthetic traffic clip with a known camera, calibrate it and compare.
     Demo(cmd::demo::Args),
+    /// Find the vehicles in footage with a detector and write their boxes.
+    Detect(cmd::detect::Args),
     /// Add a metric scale to a calibration from one known distance on the road.
     Scale(cmd::measure::ScaleArgs),
     /// Measure distances on the road with a calibration.
@@ -53,6 +55,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Calibrate(args) => return exit_code(cmd::calibrate::run(args)),
         Command::Demo(args) => return exit_code(cmd::demo::run(args)),
+        Command::Detect(args) => cmd::detect::run(args),
         Command::Scale(args) => cmd::measure::run_scale(args),
         Command::Measure(args) => cmd::measure::run_measure(args),
         Command::Aggregate(args) => cmd::aggregate::run(args),

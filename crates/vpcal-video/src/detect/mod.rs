@@ -10,11 +10,15 @@ pub mod file;
 pub mod motion;
 #[cfg(feature = "onnx")]
 pub mod onnx;
+#[cfg(feature = "onnx")]
+pub mod yolox;
 
 pub use file::FileDetector;
 pub use motion::{MotionConfig, MotionDetector};
 #[cfg(feature = "onnx")]
 pub use onnx::{OnnxConfig, OnnxDetector, OnnxLayout};
+#[cfg(feature = "onnx")]
+pub use yolox::{YoloxConfig, YoloxDetector};
 
 use vpcal_geom::BoxPx;
 

@@ -31,7 +31,7 @@ use vpcal_video::crop::{CropFilter, CropResizer};
 use vpcal_video::detect::{FileDetector, MotionConfig, MotionDetector};
 use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
 use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
-use vpcal_video::{Detector, Frame, SourceInfo, SourceOptions, Start};
+use vpcal_video::{Detector, Frame, SourceInfo, SourceKind, SourceOptions, Start};
 
 use super::aggregate::{aggregate, Aggregated, Method};
 use super::args;
@@ -42,6 +42,10 @@ pub const BUNDLED_MODEL: &[u8] = include_bytes!(concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../../models/default/model.safetensors"
 ));
+
+/// IoU above which a box of a still is the vehicle a box of an earlier still was (parked cars
+/// in a folder of pictures of one camera move by a few pixels at most between detections).
+const STILLS_SEEN_IOU: f64 = 0.7;
 
 /// Exit code of a run that completed but could not support a calibration.
 pub const EXIT_NOT_ENOUGH_EVIDENCE: u8 = 3;
@@ -104,24 +108,15 @@ pub struct PipelineArgs {
     /// Stop after this many processed frames.
     #[arg(long, value_name = "N")]
     pub max_frames: Option<u64>,
+    /// Frame rate of an image folder (pictures per second; times and speeds need it). Videos
+    /// carry their own.
+    #[arg(long, value_name = "FPS")]
+    pub fps: Option<f64>,
     /// Where to start: a frame index (`120`) or a time (`4.5s`).
     #[arg(long, value_parser = parse_start)]
     pub start: Option<Start>,
-    /// Boxes from an external detector instead of the motion detector: the reference's
-    /// detections.json, or CSV/JSON rows of frame, box, score (see vpcal-video docs).
-    #[arg(long, value_name = "FILE")]
-    pub detections: Option<PathBuf>,
-    /// A learned vehicle detector: an ONNX model file (e.g. an exported YOLO), run by tract.
-    #[cfg(feature = "onnx")]
-    #[arg(long, value_name = "FILE", conflicts_with = "detections")]
-    pub onnx: Option<PathBuf>,
-    /// Output layout of the --onnx model: yolo (v8/11), yolov5 or boxes-scores.
-    #[cfg(feature = "onnx")]
-    #[arg(long, default_value = "yolo", value_parser = parse_layout)]
-    pub onnx_layout: vpcal_video::detect::OnnxLayout,
-    /// Road mask for the motion detector (white = road), e.g. BrnoCompSpeed's video_mask.png.
-    #[arg(long, value_name = "PNG")]
-    pub road_mask: Option<PathBuf>,
+    #[command(flatten)]
+    pub detect: DetectorArgs,
     /// Drop boxes whose detector score is not above this.
     #[arg(long, default_value_t = 0.1)]
     pub min_score: f64,
@@ -145,10 +140,81 @@ pub struct PipelineArgs {
     pub quiet: bool,
 }
 
-#[cfg(feature = "onnx")]
+/// Which vehicle detector, and its settings.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DetectorArgs {
+    /// Vehicle detector: `auto` (the built-in learned detector; see the README for how the
+    /// default was chosen), `yolox` (the built-in YOLOX-nano, COCO), `motion` (weight-free
+    /// background subtraction, video only), `file:PATH` (boxes of any detector: deep_vp's
+    /// detections.json or CSV/JSON rows of frame, box, score), `yolox:PATH` (another YOLOX
+    /// ONNX export) or `onnx:PATH` (an ONNX model of the layout --onnx-layout).
+    #[arg(long, default_value = "auto", value_name = "NAME", value_parser = parse_detector)]
+    pub detector: DetectorChoice,
+    /// Same as `--detector file:FILE`.
+    #[arg(long, value_name = "FILE")]
+    pub detections: Option<PathBuf>,
+    /// Columns of square tiles the learned detector looks at besides the whole frame, for
+    /// small vehicles in large frames (0: the whole frame only). Default: by frame width
+    /// (0 up to 960 px, 2 above).
+    #[arg(long, value_name = "N")]
+    pub tiles: Option<u32>,
+    /// Output layout of an `onnx:PATH` detector: yolo (v8/11), yolov5 or boxes-scores.
+    #[arg(long, default_value = "yolo", value_parser = parse_layout)]
+    pub onnx_layout: vpcal_video::detect::OnnxLayout,
+    /// Count COCO motorcycles as vehicles too (learned detectors).
+    #[arg(long)]
+    pub motorcycles: bool,
+    /// Road mask for the motion detector (white = road), e.g. BrnoCompSpeed's video_mask.png.
+    #[arg(long, value_name = "PNG")]
+    pub road_mask: Option<PathBuf>,
+}
+
 fn parse_layout(s: &str) -> Result<vpcal_video::detect::OnnxLayout, String> {
     s.parse()
         .map_err(|e: vpcal_video::VideoError| e.to_string())
+}
+
+/// The vehicle detector `--detector` names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DetectorChoice {
+    /// The built-in learned detector (the measured default).
+    Auto,
+    /// The built-in YOLOX-nano.
+    Yolox,
+    /// The weight-free motion detector.
+    Motion,
+    /// Boxes from a file.
+    File(PathBuf),
+    /// A YOLOX model file.
+    YoloxFile(PathBuf),
+    /// An ONNX model of the `--onnx-layout` layout.
+    Onnx(PathBuf),
+}
+
+fn parse_detector(s: &str) -> Result<DetectorChoice, String> {
+    let path = |p: &str, what: &str| {
+        if p.is_empty() {
+            Err(format!("`{s}`: give the {what} after the colon"))
+        } else {
+            Ok(PathBuf::from(p))
+        }
+    };
+    match s.split_once(':') {
+        None => match s {
+            "auto" => Ok(DetectorChoice::Auto),
+            "yolox" => Ok(DetectorChoice::Yolox),
+            "motion" => Ok(DetectorChoice::Motion),
+            _ => Err(format!(
+                "unknown detector `{s}`: expected auto, yolox, motion, file:PATH, yolox:PATH or onnx:PATH"
+            )),
+        },
+        Some(("file", p)) => path(p, "detections file").map(DetectorChoice::File),
+        Some(("yolox", p)) => path(p, "YOLOX ONNX file").map(DetectorChoice::YoloxFile),
+        Some(("onnx", p)) => path(p, "ONNX file").map(DetectorChoice::Onnx),
+        Some((kind, _)) => Err(format!(
+            "unknown detector kind `{kind}:` in `{s}`: expected file:PATH, yolox:PATH or onnx:PATH"
+        )),
+    }
 }
 
 fn parse_start(s: &str) -> Result<Start, String> {
@@ -230,6 +296,8 @@ pub struct PipelineStats {
     pub dropped_static: u64,
     pub dropped_over_limit: u64,
     pub dropped_outside: u64,
+    /// Boxes of a still-image folder at the place of a box kept in an earlier picture.
+    pub dropped_seen: u64,
     pub crops: u64,
     pub seconds: f64,
 }
@@ -355,11 +423,14 @@ impl<'a> Stages<'a> {
     }
 
     /// The per-frame filter (each pass over the frames gets its own: it compares a frame's
-    /// boxes with the previous frame's).
-    fn filter(&self) -> FrameFilter {
+    /// boxes with the previous frame's). Stills are not consecutive frames: there a vehicle
+    /// that stays in place (parked) counts once instead of being dropped as static.
+    fn filter(&self, kind: SourceKind) -> FrameFilter {
+        let stills = kind != SourceKind::Video;
         FrameFilter::new(FilterConfig {
             min_score: Some(self.a.min_score as f32),
-            drop_static: !self.a.keep_static,
+            drop_static: !self.a.keep_static && !stills,
+            drop_seen_iou: (stills && !self.a.keep_static).then_some(STILLS_SEEN_IOU),
             max_per_frame: (self.a.max_per_frame > 0).then_some(self.a.max_per_frame),
             ..FilterConfig::default()
         })
@@ -383,6 +454,7 @@ impl<'a> Stages<'a> {
                 DropReason::Static => self.stats.dropped_static += 1,
                 DropReason::OverLimit => self.stats.dropped_over_limit += 1,
                 DropReason::OutsideFrame => self.stats.dropped_outside += 1,
+                DropReason::SeenBefore => self.stats.dropped_seen += 1,
             }
         }
         if filtered.kept.is_empty() {
@@ -458,6 +530,7 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
         every: a.every,
         max_frames: a.max_frames,
         start: a.start.unwrap_or_default(),
+        image_fps: a.fps,
         ..SourceOptions::default()
     };
     options
@@ -468,10 +541,16 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     let mut source = vpcal_video::open_source(input, &options)
         .with_context(|| format!("opening {}", input.display()))?;
     let info = source.info().clone();
-    let mut detector = open_detector(a, &info)?;
+    if a.fps.is_some() && info.kind == SourceKind::Video {
+        bail!(
+            "--fps applies to image folders; the video {} has its own frame rate",
+            input.display()
+        );
+    }
+    let mut detector = open_detector(&a.detect, &info)?;
     let detector_name = detector.name();
     let mut stages = Stages::new(&net, a)?;
-    let mut filter = stages.filter();
+    let mut filter = stages.filter(info.kind);
 
     let expected = info.expected_frames(&options);
     let pb = super::progress_bar(expected, "frames", a.quiet);
@@ -514,7 +593,7 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
         pb.inc_length(learning_frames);
         let mut source = vpcal_video::open_source(input, &options)
             .with_context(|| format!("opening {} again", input.display()))?;
-        let mut filter = stages.filter();
+        let mut filter = stages.filter(info.kind);
         for frame in source.by_ref() {
             let frame = frame.with_context(|| format!("reading {}", input.display()))?;
             if frame.index >= until {
@@ -551,44 +630,90 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     })
 }
 
-/// The detector the flags ask for: a detections file, an ONNX model (feature `onnx`) or the
-/// motion detector (default, with an optional road mask).
-fn open_detector(a: &PipelineArgs, info: &SourceInfo) -> Result<Box<dyn Detector>> {
-    if a.road_mask.is_some() && a.detections.is_some() {
-        bail!("--road-mask applies to the motion detector, not to --detections");
+/// Tile columns for the learned detector when `--tiles` is not given: none up to 960 px
+/// wide, 2 above (see the README's measurement of recall against cost).
+pub fn default_tiles(width: u32) -> u32 {
+    if width > 960 {
+        2
+    } else {
+        0
     }
-    if let Some(path) = &a.detections {
-        return Ok(Box::new(FileDetector::open(path)?));
+}
+
+/// The detector `--detector` resolves to for this input: `auto` is the learned detector.
+pub fn resolve_detector(a: &DetectorArgs) -> DetectorChoice {
+    match (&a.detections, &a.detector) {
+        (Some(path), _) => DetectorChoice::File(path.clone()),
+        (None, DetectorChoice::Auto) => DetectorChoice::Yolox,
+        (None, other) => other.clone(),
     }
-    #[cfg(feature = "onnx")]
-    if let Some(path) = &a.onnx {
-        if a.road_mask.is_some() {
-            bail!("--road-mask applies to the motion detector, not to --onnx");
+}
+
+/// The detector the flags ask for (see [`PipelineArgs::detector`]).
+pub fn open_detector(a: &DetectorArgs, info: &SourceInfo) -> Result<Box<dyn Detector>> {
+    use vpcal_video::detect::{YoloxConfig, YoloxDetector};
+    if a.detections.is_some() && a.detector != DetectorChoice::Auto {
+        bail!("--detections FILE is --detector file:FILE: give one of them");
+    }
+    let choice = resolve_detector(a);
+    if a.road_mask.is_some() && choice != DetectorChoice::Motion {
+        bail!("--road-mask applies to the motion detector (--detector motion) only");
+    }
+    let yolox_config = || {
+        let mut classes = vpcal_video::detect::yolox::COCO_CAR_BUS_TRUCK.to_vec();
+        if a.motorcycles {
+            classes.push(vpcal_video::detect::yolox::COCO_MOTORCYCLE);
         }
-        let config = vpcal_video::detect::OnnxConfig {
-            layout: a.onnx_layout,
-            ..vpcal_video::detect::OnnxConfig::default()
-        };
-        return Ok(Box::new(vpcal_video::detect::OnnxDetector::open(
-            path, config,
-        )?));
-    }
-    let mut d = MotionDetector::new(MotionConfig::default())?;
-    if let Some(mask) = &a.road_mask {
-        let m = vpcal_video::detect::motion::load_road_mask(mask)?;
-        if m.dimensions() != (info.width, info.height) {
-            bail!(
-                "--road-mask {}: {}x{} pixels, but the frames are {}x{}",
-                mask.display(),
-                m.width(),
-                m.height(),
-                info.width,
-                info.height
-            );
+        YoloxConfig {
+            classes,
+            tiles: a.tiles.unwrap_or_else(|| default_tiles(info.width)),
+            ..YoloxConfig::default()
         }
-        d = d.with_road_mask(m, mask.clone());
+    };
+    match choice {
+        DetectorChoice::File(path) => Ok(Box::new(FileDetector::open(&path)?)),
+        DetectorChoice::Yolox | DetectorChoice::Auto => {
+            Ok(Box::new(YoloxDetector::bundled(yolox_config())?))
+        }
+        DetectorChoice::YoloxFile(path) => Ok(Box::new(YoloxDetector::open(&path, yolox_config())?)),
+        DetectorChoice::Onnx(path) => {
+            let mut classes = vpcal_video::detect::onnx::COCO_VEHICLES.to_vec();
+            if !a.motorcycles {
+                classes.retain(|&c| c != vpcal_video::detect::yolox::COCO_MOTORCYCLE);
+            }
+            let config = vpcal_video::detect::OnnxConfig {
+                layout: a.onnx_layout,
+                classes: Some(classes),
+                ..vpcal_video::detect::OnnxConfig::default()
+            };
+            Ok(Box::new(vpcal_video::detect::OnnxDetector::open(&path, config)?))
+        }
+        DetectorChoice::Motion => {
+            if info.kind != vpcal_video::SourceKind::Video {
+                bail!(
+                    "--detector motion needs a video (it learns the background from consecutive \
+                     frames); {} is a still or a folder of stills: use --detector yolox",
+                    info.path.display()
+                );
+            }
+            let mut d = MotionDetector::new(MotionConfig::default())?;
+            if let Some(mask) = &a.road_mask {
+                let m = vpcal_video::detect::motion::load_road_mask(mask)?;
+                if m.dimensions() != (info.width, info.height) {
+                    bail!(
+                        "--road-mask {}: {}x{} pixels, but the frames are {}x{}",
+                        mask.display(),
+                        m.width(),
+                        m.height(),
+                        info.width,
+                        info.height
+                    );
+                }
+                d = d.with_road_mask(m, mask.clone());
+            }
+            Ok(Box::new(d))
+        }
     }
-    Ok(Box::new(d))
 }
 
 /// The principal point: `--pp` or the image centre.
@@ -658,6 +783,7 @@ fn input_json(out: &PipelineOutput) -> Value {
             "static": out.stats.dropped_static,
             "over_limit": out.stats.dropped_over_limit,
             "outside_frame": out.stats.dropped_outside,
+            "seen_before": out.stats.dropped_seen,
         },
         "vehicle_boxes": out.stats.crops,
         "seconds": out.stats.seconds,
@@ -670,6 +796,7 @@ fn settings_json(out: &PipelineOutput, a: &PipelineArgs) -> Value {
         "device": a.device,
         "detector": out.detector,
         "every": a.every,
+        "fps": a.fps,
         "max_frames": a.max_frames,
         "start": a.start.map(|s| format!("{s:?}")),
         "min_score": a.min_score,
@@ -733,8 +860,14 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
     row(
         "boxes",
         format!(
-            "{} detected, {} kept (dropped: {} low score, {} static, {} over the per-frame limit)",
-            s.detections, s.crops, s.dropped_low_score, s.dropped_static, s.dropped_over_limit
+            "{} detected, {} kept (dropped: {} low score, {} static, {} seen in an earlier \
+             picture, {} over the per-frame limit)",
+            s.detections,
+            s.crops,
+            s.dropped_low_score,
+            s.dropped_static,
+            s.dropped_seen,
+            s.dropped_over_limit
         ),
     );
     row("model", out.model.clone());

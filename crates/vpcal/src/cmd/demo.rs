@@ -82,7 +82,7 @@ pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
     let results = a.out.join("results").join(&name);
     let video = dataset.join("video.mp4");
     if a.true_boxes {
-        a.pipeline.detections = Some(dataset.join("detections.csv"));
+        a.pipeline.detect.detections = Some(dataset.join("detections.csv"));
     }
     // The synthetic camera's principal point is the image centre, the pipeline's default.
     let out = calibrate::run_pipeline(&video, &a.pipeline)?;

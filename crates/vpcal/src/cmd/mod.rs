@@ -6,6 +6,7 @@ pub mod bench_net;
 pub mod calibrate;
 pub mod data;
 pub mod demo;
+pub mod detect;
 pub mod eval;
 pub mod measure;
 pub mod overlay;

@@ -1,0 +1,110 @@
+//! `vpcal detect`: the vehicle boxes a detector finds in footage, as a detections file that
+//! `calibrate --detector file:PATH` reads back (CSV or JSON rows of frame, box, score).
+//!
+//! For looking at a detector's output, measuring its recall against true boxes
+//! (`scripts/detector_recall.py`) and its speed (`scripts/bench_detector.py`).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use serde_json::json;
+use vpcal_video::detect::file::write_detections;
+use vpcal_video::{SourceOptions, Start};
+
+use super::calibrate::{check_destination, open_detector, DetectorArgs};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Video file (anything FFmpeg reads), folder of images, or one image.
+    pub input: PathBuf,
+    /// Write the detections here (`.csv`: frame,x0,y0,x1,y1,score; other names: JSON).
+    #[arg(short, long, value_name = "FILE")]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub detect: DetectorArgs,
+    /// Process every K-th frame.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub every: u64,
+    /// Stop after this many processed frames.
+    #[arg(long, value_name = "N")]
+    pub max_frames: Option<u64>,
+    /// Where to start: a frame index (`120`) or a time (`4.5s`).
+    #[arg(long, value_parser = parse_start)]
+    pub start: Option<Start>,
+    /// Print a JSON summary (frames, boxes, seconds, detector) on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+fn parse_start(s: &str) -> Result<Start, String> {
+    s.parse::<Start>().map_err(|e| e.to_string())
+}
+
+pub fn run(a: Args) -> Result<()> {
+    check_destination("--output", &a.output)?;
+    let options = SourceOptions {
+        every: a.every,
+        max_frames: a.max_frames,
+        start: a.start.unwrap_or_default(),
+        ..SourceOptions::default()
+    };
+    options
+        .validate()
+        .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;
+    let mut source = vpcal_video::open_source(&a.input, &options)
+        .with_context(|| format!("opening {}", a.input.display()))?;
+    let info = source.info().clone();
+    let mut detector = open_detector(&a.detect, &info)?;
+    let pb = super::progress_bar(info.expected_frames(&options), "frames", a.quiet);
+    let t0 = Instant::now();
+    let mut rows = Vec::new();
+    let mut frames = 0u64;
+    let mut detect_s = 0.0;
+    for frame in source.by_ref() {
+        let frame = frame.with_context(|| format!("reading {}", a.input.display()))?;
+        let t = Instant::now();
+        let dets = detector
+            .detect(&frame)
+            .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
+        detect_s += t.elapsed().as_secs_f64();
+        frames += 1;
+        rows.extend(dets.into_iter().map(|d| (frame.index, d)));
+        pb.inc(1);
+        pb.set_message(format!("{} boxes", rows.len()));
+    }
+    pb.finish_and_clear();
+    for w in source.warnings() {
+        eprintln!("warning: {}: {w}", a.input.display());
+    }
+    if frames == 0 {
+        bail!("{}: no frames to process", a.input.display());
+    }
+    write_detections(&a.output, &rows)?;
+    let summary = json!({
+        "input": a.input.display().to_string(),
+        "image_size": [info.width, info.height],
+        "detector": detector.name(),
+        "frames": frames,
+        "boxes": rows.len(),
+        "seconds": t0.elapsed().as_secs_f64(),
+        "detector_seconds": detect_s,
+        "detector_frames_per_s": frames as f64 / detect_s.max(1e-9),
+    });
+    eprintln!(
+        "vpcal detect: {} boxes in {frames} frames ({}x{}), {:.2} frames/s in the detector ({}); wrote {}",
+        rows.len(),
+        info.width,
+        info.height,
+        frames as f64 / detect_s.max(1e-9),
+        detector.name(),
+        a.output.display()
+    );
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    }
+    Ok(())
+}
