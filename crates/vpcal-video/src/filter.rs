@@ -236,7 +236,10 @@ mod tests {
         let b = f.apply(&frame, vec![d(11.0), d(50.0), d(100.0)]);
         assert_eq!(b.kept.len(), 1);
         assert!((b.kept[0].bbox.x0 - 100.0).abs() < 1e-9);
-        assert!(b.dropped.iter().all(|(_, why)| *why == DropReason::SeenBefore));
+        assert!(b
+            .dropped
+            .iter()
+            .all(|(_, why)| *why == DropReason::SeenBefore));
         // Two boxes of one frame never suppress each other through this rule.
         let c = f.apply(&frame, vec![d(200.0), d(201.0)]);
         assert_eq!(c.kept.len(), 2);

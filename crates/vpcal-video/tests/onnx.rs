@@ -175,7 +175,10 @@ mod yolox {
             let (lb, cands) = det.candidates(&img, region).unwrap();
             assert_eq!(
                 [lb.resized.0 as u64, lb.resized.1 as u64],
-                [case["resized"][0].as_u64().unwrap(), case["resized"][1].as_u64().unwrap()]
+                [
+                    case["resized"][0].as_u64().unwrap(),
+                    case["resized"][1].as_u64().unwrap()
+                ]
             );
             // The golden has no tile-border rule: map the region's candidates to the frame and
             // suppress, as a whole-frame pass of that region would.
@@ -213,10 +216,20 @@ mod yolox {
     fn a_damaged_model_file_is_refused_with_its_sha1() {
         let mut bytes = BUNDLED_YOLOX.to_vec();
         bytes[1000] ^= 0xff;
-        let e = YoloxDetector::from_bytes(&bytes, "damaged.onnx", Some(BUNDLED_YOLOX_SHA1), YoloxConfig::default())
-            .unwrap_err();
+        let e = YoloxDetector::from_bytes(
+            &bytes,
+            "damaged.onnx",
+            Some(BUNDLED_YOLOX_SHA1),
+            YoloxConfig::default(),
+        )
+        .unwrap_err();
         let msg = e.to_string();
-        assert!(msg.contains("SHA-1") && msg.contains(BUNDLED_YOLOX_SHA1) && msg.contains("damaged.onnx"), "{msg}");
+        assert!(
+            msg.contains("SHA-1")
+                && msg.contains(BUNDLED_YOLOX_SHA1)
+                && msg.contains("damaged.onnx"),
+            "{msg}"
+        );
         // Without the check, a truncated file is not a readable model.
         let e = YoloxDetector::from_bytes(&bytes[..5000], "cut.onnx", None, YoloxConfig::default())
             .unwrap_err();
@@ -225,7 +238,8 @@ mod yolox {
 
     #[test]
     fn a_model_of_another_layout_is_refused() {
-        let e = YoloxDetector::open(&fixture("tiny_yolo.onnx"), YoloxConfig::default()).unwrap_err();
+        let e =
+            YoloxDetector::open(&fixture("tiny_yolo.onnx"), YoloxConfig::default()).unwrap_err();
         assert!(matches!(e, VideoError::Model { .. }), "{e}");
     }
 
@@ -249,7 +263,12 @@ mod yolox {
         let a = whole.detect(&frame).unwrap();
         let b = tiled.detect(&frame).unwrap();
         assert!(!a.is_empty());
-        assert!(b.len() >= a.len(), "tiles {} < whole frame {}", b.len(), a.len());
+        assert!(
+            b.len() >= a.len(),
+            "tiles {} < whole frame {}",
+            b.len(),
+            a.len()
+        );
         assert!(tiled.name().contains("tiles"));
     }
 }

@@ -38,6 +38,8 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
         &o("system.json"),
         "--max-frames",
         "200",
+        "--detector",
+        "motion",
         "--quiet",
     ]);
     let code = r.status.code().unwrap();
@@ -174,14 +176,148 @@ fn calibrate_refuses_bad_input_without_leaving_files() {
         text(&r)
     );
     assert!(!calib.exists());
+    // Detectors: an unknown name is a usage error listing the choices; a model file that
+    // does not exist is named.
+    let r = vpcal(&[
+        "calibrate",
+        img.to_str().unwrap(),
+        "--detector",
+        "centernet",
+    ]);
+    assert_eq!(r.status.code(), Some(2), "{}", text(&r));
+    assert!(text(&r).contains("yolox:PATH"), "{}", text(&r));
+    let r = vpcal(&[
+        "calibrate",
+        img.to_str().unwrap(),
+        "--detector",
+        "yolox:no_such_model.onnx",
+        "-o",
+        calib.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(text(&r).contains("no_such_model.onnx"), "{}", text(&r));
+    assert!(!calib.exists());
     // --every 0 is refused by the frame selection.
     let r = vpcal(&["calibrate", img.to_str().unwrap(), "--every", "0"]);
     assert_eq!(r.status.code(), Some(1), "{}", text(&r));
     assert!(text(&r).contains("every"), "{}", text(&r));
 }
 
+/// A synthetic highway frame (640x360) in which the built-in detector finds vehicles, copied
+/// `copies` times into a fresh folder.
+fn folder_of_one_still(dir: &Path, copies: usize) -> std::path::PathBuf {
+    let scene = dir.join("scene");
+    let r = vpcal(&[
+        "synth",
+        "scene",
+        "--layout",
+        "highway",
+        "--frames",
+        "12",
+        "--frames-dir",
+        "--no-video",
+        "--width",
+        "640",
+        "--height",
+        "360",
+        "--seed",
+        "3",
+        "--out",
+        scene.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", text(&r));
+    let frame = scene.join("dataset/highway_s3/frames/000011.png");
+    let stills = dir.join("stills");
+    std::fs::create_dir_all(&stills).unwrap();
+    for k in 0..copies {
+        std::fs::copy(&frame, stills.join(format!("{k:02}.png"))).unwrap();
+    }
+    stills
+}
+
 #[test]
-fn a_still_image_without_motion_is_not_enough_evidence() {
+fn stills_are_calibrated_with_the_learned_detector_and_a_parked_vehicle_counts_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let stills = folder_of_one_still(dir.path(), 3);
+    let calib = dir.path().join("calib.json");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "calibrate",
+            stills.to_str().unwrap(),
+            "-o",
+            calib.to_str().unwrap(),
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        let r = vpcal(&args);
+        (r.status.code(), text(&r), read_json(&calib))
+    };
+    // Three pictures of the same scene: every vehicle is parked, and counts once.
+    let (code, out, doc) = run(&[]);
+    assert!(code == Some(0) || code == Some(3), "{out}");
+    assert!(out.contains("yolox"), "{out}");
+    let kept = doc["input"]["vehicle_boxes"].as_u64().unwrap();
+    assert!(kept >= 1, "no vehicle found: {out}");
+    assert_eq!(
+        doc["input"]["dropped"]["seen_before"].as_u64().unwrap(),
+        2 * kept,
+        "{out}"
+    );
+    assert_eq!(
+        doc["input"]["dropped"]["static"].as_u64().unwrap(),
+        0,
+        "{out}"
+    );
+    if code == Some(3) {
+        assert_eq!(doc["status"], "not_enough_evidence");
+        assert!(doc["reason"].as_str().unwrap().contains("vehicle"), "{out}");
+    }
+    // With a frame rate the folder is a frame sequence: the static rule applies instead
+    // (identical frames: nothing moves after the first).
+    let (_, out, doc) = run(&["--fps", "25"]);
+    assert_eq!(
+        doc["input"]["dropped"]["seen_before"].as_u64().unwrap(),
+        0,
+        "{out}"
+    );
+    assert_eq!(doc["input"]["fps"].as_f64(), Some(25.0), "{out}");
+    // One still alone.
+    let one = stills.join("00.png");
+    let r = vpcal(&[
+        "calibrate",
+        one.to_str().unwrap(),
+        "-o",
+        calib.to_str().unwrap(),
+        "--quiet",
+    ]);
+    let doc = read_json(&calib);
+    assert_eq!(
+        doc["input"]["vehicle_boxes"].as_u64().unwrap(),
+        kept,
+        "{}",
+        text(&r)
+    );
+    // The motion detector cannot work on stills: a clear error, no output file.
+    std::fs::remove_file(&calib).unwrap();
+    let r = vpcal(&[
+        "calibrate",
+        stills.to_str().unwrap(),
+        "--detector",
+        "motion",
+        "-o",
+        calib.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(
+        text(&r).contains("needs consecutive frames"),
+        "{}",
+        text(&r)
+    );
+    assert!(!calib.exists());
+}
+
+#[test]
+fn a_still_image_without_vehicles_is_not_enough_evidence() {
     let out = tempfile::tempdir().unwrap();
     let img = out.path().join("frame.png");
     image::RgbImage::from_fn(160, 120, |x, y| {

@@ -380,10 +380,7 @@ pub fn decode(
 /// (within `margin` pixels).
 pub fn touches_inner_border(b: &BoxPx, region: &Region, frame: (u32, u32), margin: f64) -> bool {
     let (x0, y0) = (f64::from(region.x0), f64::from(region.y0));
-    let (x1, y1) = (
-        x0 + f64::from(region.width),
-        y0 + f64::from(region.height),
-    );
+    let (x1, y1) = (x0 + f64::from(region.width), y0 + f64::from(region.height));
     (region.x0 > 0 && b.x0 <= x0 + margin)
         || (region.y0 > 0 && b.y0 <= y0 + margin)
         || (region.x0 + region.width < frame.0 && b.x1 >= x1 - margin)
@@ -406,7 +403,8 @@ pub fn merge_passes(
         for c in cands {
             let bbox = lb.to_frame(c.bbox);
             if !bbox.is_valid()
-                || (!whole && touches_inner_border(&bbox, &lb.region, frame, INNER_BORDER_MARGIN_PX))
+                || (!whole
+                    && touches_inner_border(&bbox, &lb.region, frame, INNER_BORDER_MARGIN_PX))
             {
                 continue;
             }
@@ -586,7 +584,11 @@ impl YoloxDetector {
     ///
     /// # Errors
     /// A failed model run or an output that does not decode.
-    pub fn candidates(&self, image: &RgbImage, region: Region) -> Result<(Letterbox, Vec<Candidate>)> {
+    pub fn candidates(
+        &self,
+        image: &RgbImage,
+        region: Region,
+    ) -> Result<(Letterbox, Vec<Candidate>)> {
         let lb = Letterbox::new(region, self.input);
         let mut input = Vec::new();
         letterbox_input(image, &lb, &mut input);
@@ -618,53 +620,55 @@ impl YoloxDetector {
     }
 }
 
+/// One region's letterbox and candidates.
+type Pass = (Letterbox, Vec<Candidate>);
+
 impl Detector for YoloxDetector {
     fn detect(&mut self, frame: &Frame) -> Result<Vec<Detection>> {
         let (w, h) = frame.image.dimensions();
         let regions = self.regions(w, h);
         let this = &*self;
-        let passes: Vec<Result<(Letterbox, Vec<Candidate>)>> = std::thread::scope(|s| {
-            // At most two regions at a time per thread pair: tract runs one thread per model
-            // run, and the machines vpcal targets have few cores.
-            let threads = std::thread::available_parallelism()
-                .map(|n| n.get())
-                .unwrap_or(1)
-                .clamp(1, regions.len().max(1));
-            let chunks: Vec<Vec<(usize, Region)>> = (0..threads)
+        // The regions are independent model runs (tract runs each on one thread): spread
+        // them over the cores, in a fixed assignment so that the result does not depend on
+        // timing.
+        let threads = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+            .clamp(1, regions.len().max(1));
+        let mut passes: Vec<Option<Result<Pass>>> = (0..regions.len()).map(|_| None).collect();
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..threads)
                 .map(|t| {
-                    regions
+                    let mine: Vec<(usize, Region)> = regions
                         .iter()
                         .copied()
                         .enumerate()
                         .filter(|(i, _)| i % threads == t)
-                        .collect()
-                })
-                .collect();
-            let handles: Vec<_> = chunks
-                .into_iter()
-                .map(|chunk| {
+                        .collect();
                     s.spawn(move || {
-                        chunk
-                            .into_iter()
+                        mine.into_iter()
                             .map(|(i, r)| (i, this.candidates(&frame.image, r)))
                             .collect::<Vec<_>>()
                     })
                 })
                 .collect();
-            let mut all: Vec<(usize, Result<(Letterbox, Vec<Candidate>)>)> = handles
-                .into_iter()
-                .flat_map(|h| h.join().unwrap_or_default())
-                .collect();
-            all.sort_by_key(|(i, _)| *i);
-            all.into_iter().map(|(_, r)| r).collect()
+            for handle in handles {
+                for (i, pass) in handle.join().unwrap_or_default() {
+                    passes[i] = Some(pass);
+                }
+            }
         });
-        if passes.len() != regions.len() {
-            return Err(VideoError::Model {
-                path: self.label.clone().into(),
-                message: "a detector thread panicked".into(),
-            });
-        }
-        let passes = passes.into_iter().collect::<Result<Vec<_>>>()?;
+        let passes = passes
+            .into_iter()
+            .map(|p| {
+                p.unwrap_or_else(|| {
+                    Err(VideoError::Model {
+                        path: self.label.clone().into(),
+                        message: "a detector thread panicked".into(),
+                    })
+                })
+            })
+            .collect::<Result<Vec<Pass>>>()?;
         Ok(merge_passes(
             passes,
             (w, h),
@@ -725,8 +729,16 @@ mod tests {
         for y in 0..n {
             for x in 0..n {
                 let inside = x < ow && y < oh;
-                let bgr = [input[y * n + x], input[n * n + y * n + x], input[2 * n * n + y * n + x]];
-                let want = if inside { [30.0, 20.0, 10.0] } else { [PAD_VALUE; 3] };
+                let bgr = [
+                    input[y * n + x],
+                    input[n * n + y * n + x],
+                    input[2 * n * n + y * n + x],
+                ];
+                let want = if inside {
+                    [30.0, 20.0, 10.0]
+                } else {
+                    [PAD_VALUE; 3]
+                };
                 for c in 0..3 {
                     assert!((bgr[c] - want[c]).abs() < 1e-3, "({x}, {y}) {bgr:?}");
                 }
@@ -754,8 +766,14 @@ mod tests {
         assert_eq!(c.len(), 1);
         let b = c[0].bbox;
         // centre ((1 + 0.5) * 16, (2 + 0.25) * 16) = (24, 36), size 32 x 16.
-        assert!((b[0] - 8.0).abs() < 1e-5 && (b[2] - 40.0).abs() < 1e-5, "{b:?}");
-        assert!((b[1] - 28.0).abs() < 1e-5 && (b[3] - 44.0).abs() < 1e-5, "{b:?}");
+        assert!(
+            (b[0] - 8.0).abs() < 1e-5 && (b[2] - 40.0).abs() < 1e-5,
+            "{b:?}"
+        );
+        assert!(
+            (b[1] - 28.0).abs() < 1e-5 && (b[3] - 44.0).abs() < 1e-5,
+            "{b:?}"
+        );
         assert!((c[0].score - 0.72).abs() < 1e-6);
         assert_eq!(c[0].class, 2);
         assert!(decode(&raw[1..], cols, input, &[2], 0.25).is_err());
@@ -764,18 +782,30 @@ mod tests {
 
     #[test]
     fn tiles_cover_the_frame_and_overlap() {
-        for (w, h, n) in [(1920, 1080, 2), (1920, 1080, 3), (640, 352, 2), (320, 240, 1), (1242, 375, 3)] {
+        for (w, h, n) in [
+            (1920, 1080, 2),
+            (1920, 1080, 3),
+            (640, 352, 2),
+            (320, 240, 1),
+            (1242, 375, 3),
+        ] {
             let t = tile_regions(w, h, n, 0.2);
             assert!(!t.is_empty());
             for r in &t {
-                assert!(r.x0 + r.width <= w && r.y0 + r.height <= h, "{w}x{h} {n}: {r:?}");
+                assert!(
+                    r.x0 + r.width <= w && r.y0 + r.height <= h,
+                    "{w}x{h} {n}: {r:?}"
+                );
                 assert_eq!(r.width, r.height);
             }
             // Every pixel is in some tile.
             for y in (0..h).step_by(7) {
                 for x in (0..w).step_by(7) {
                     assert!(
-                        t.iter().any(|r| x >= r.x0 && x < r.x0 + r.width && y >= r.y0 && y < r.y0 + r.height),
+                        t.iter().any(|r| x >= r.x0
+                            && x < r.x0 + r.width
+                            && y >= r.y0
+                            && y < r.y0 + r.height),
                         "{w}x{h} {n}: ({x}, {y}) uncovered"
                     );
                 }
@@ -814,7 +844,10 @@ mod tests {
         };
         let merged = merge_passes(
             vec![
-                (whole, vec![cand(in_whole(1000.0, 500.0, 1100.0, 560.0), 0.7)]),
+                (
+                    whole,
+                    vec![cand(in_whole(1000.0, 500.0, 1100.0, 560.0), 0.7)],
+                ),
                 (
                     tile,
                     vec![

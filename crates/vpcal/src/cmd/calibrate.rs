@@ -108,8 +108,10 @@ pub struct PipelineArgs {
     /// Stop after this many processed frames.
     #[arg(long, value_name = "N")]
     pub max_frames: Option<u64>,
-    /// Frame rate of an image folder (pictures per second; times and speeds need it). Videos
-    /// carry their own.
+    /// Frame rate of an image folder: its pictures are then consecutive frames, treated as a
+    /// video (times, tracks and speeds need it). Without it a folder is a set of stills of one
+    /// camera, and a vehicle at the same place in several of them counts once. Videos carry
+    /// their own rate.
     #[arg(long, value_name = "FPS")]
     pub fps: Option<f64>,
     /// Where to start: a frame index (`120`) or a time (`4.5s`).
@@ -425,8 +427,8 @@ impl<'a> Stages<'a> {
     /// The per-frame filter (each pass over the frames gets its own: it compares a frame's
     /// boxes with the previous frame's). Stills are not consecutive frames: there a vehicle
     /// that stays in place (parked) counts once instead of being dropped as static.
-    fn filter(&self, kind: SourceKind) -> FrameFilter {
-        let stills = kind != SourceKind::Video;
+    fn filter(&self, info: &SourceInfo) -> FrameFilter {
+        let stills = is_stills(info);
         FrameFilter::new(FilterConfig {
             min_score: Some(self.a.min_score as f32),
             drop_static: !self.a.keep_static && !stills,
@@ -550,7 +552,7 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     let mut detector = open_detector(&a.detect, &info)?;
     let detector_name = detector.name();
     let mut stages = Stages::new(&net, a)?;
-    let mut filter = stages.filter(info.kind);
+    let mut filter = stages.filter(&info);
 
     let expected = info.expected_frames(&options);
     let pb = super::progress_bar(expected, "frames", a.quiet);
@@ -593,7 +595,7 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
         pb.inc_length(learning_frames);
         let mut source = vpcal_video::open_source(input, &options)
             .with_context(|| format!("opening {} again", input.display()))?;
-        let mut filter = stages.filter(info.kind);
+        let mut filter = stages.filter(&info);
         for frame in source.by_ref() {
             let frame = frame.with_context(|| format!("reading {}", input.display()))?;
             if frame.index >= until {
@@ -628,6 +630,16 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
         stats,
         picture: last_frame,
     })
+}
+
+/// Whether the input is stills rather than consecutive frames: one image, or a folder of
+/// images without `--fps` (with it, the folder is a frame sequence and is treated as video).
+pub fn is_stills(info: &SourceInfo) -> bool {
+    match info.kind {
+        SourceKind::Video => false,
+        SourceKind::SingleImage => true,
+        SourceKind::ImageFolder => info.fps.is_none(),
+    }
 }
 
 /// Tile columns for the learned detector when `--tiles` is not given: none up to 960 px
@@ -675,7 +687,9 @@ pub fn open_detector(a: &DetectorArgs, info: &SourceInfo) -> Result<Box<dyn Dete
         DetectorChoice::Yolox | DetectorChoice::Auto => {
             Ok(Box::new(YoloxDetector::bundled(yolox_config())?))
         }
-        DetectorChoice::YoloxFile(path) => Ok(Box::new(YoloxDetector::open(&path, yolox_config())?)),
+        DetectorChoice::YoloxFile(path) => {
+            Ok(Box::new(YoloxDetector::open(&path, yolox_config())?))
+        }
         DetectorChoice::Onnx(path) => {
             let mut classes = vpcal_video::detect::onnx::COCO_VEHICLES.to_vec();
             if !a.motorcycles {
@@ -686,13 +700,16 @@ pub fn open_detector(a: &DetectorArgs, info: &SourceInfo) -> Result<Box<dyn Dete
                 classes: Some(classes),
                 ..vpcal_video::detect::OnnxConfig::default()
             };
-            Ok(Box::new(vpcal_video::detect::OnnxDetector::open(&path, config)?))
+            Ok(Box::new(vpcal_video::detect::OnnxDetector::open(
+                &path, config,
+            )?))
         }
         DetectorChoice::Motion => {
-            if info.kind != vpcal_video::SourceKind::Video {
+            if is_stills(info) {
                 bail!(
-                    "--detector motion needs a video (it learns the background from consecutive \
-                     frames); {} is a still or a folder of stills: use --detector yolox",
+                    "--detector motion needs consecutive frames (it learns the background from \
+                     them): {} is a still or a folder of stills; use --detector yolox, or give \
+                     a folder of consecutive frames its rate with --fps",
                     info.path.display()
                 );
             }

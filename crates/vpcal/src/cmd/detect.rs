@@ -32,6 +32,10 @@ pub struct Args {
     /// Where to start: a frame index (`120`) or a time (`4.5s`).
     #[arg(long, value_parser = parse_start)]
     pub start: Option<Start>,
+    /// Also draw the boxes of the processed frame with the most of them (PNG), to check the
+    /// detector by eye.
+    #[arg(long, value_name = "PNG")]
+    pub picture: Option<PathBuf>,
     /// Print a JSON summary (frames, boxes, seconds, detector) on stdout.
     #[arg(long)]
     pub json: bool,
@@ -46,6 +50,9 @@ fn parse_start(s: &str) -> Result<Start, String> {
 
 pub fn run(a: Args) -> Result<()> {
     check_destination("--output", &a.output)?;
+    if let Some(p) = &a.picture {
+        check_destination("--picture", p)?;
+    }
     let options = SourceOptions {
         every: a.every,
         max_frames: a.max_frames,
@@ -64,6 +71,8 @@ pub fn run(a: Args) -> Result<()> {
     let mut rows = Vec::new();
     let mut frames = 0u64;
     let mut detect_s = 0.0;
+    // The frame with the most boxes so far, for --picture.
+    let mut busiest: Option<(usize, image::RgbImage, Vec<vpcal_geom::BoxPx>)> = None;
     for frame in source.by_ref() {
         let frame = frame.with_context(|| format!("reading {}", a.input.display()))?;
         let t = Instant::now();
@@ -72,6 +81,10 @@ pub fn run(a: Args) -> Result<()> {
             .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
         detect_s += t.elapsed().as_secs_f64();
         frames += 1;
+        if a.picture.is_some() && busiest.as_ref().is_none_or(|(n, _, _)| dets.len() > *n) {
+            let boxes = dets.iter().map(|d| d.bbox).collect();
+            busiest = Some((dets.len(), frame.image.clone(), boxes));
+        }
         rows.extend(dets.into_iter().map(|d| (frame.index, d)));
         pb.inc(1);
         pb.set_message(format!("{} boxes", rows.len()));
@@ -84,6 +97,13 @@ pub fn run(a: Args) -> Result<()> {
         bail!("{}: no frames to process", a.input.display());
     }
     write_detections(&a.output, &rows)?;
+    if let (Some(path), Some((_, image, boxes))) = (&a.picture, &busiest) {
+        let colored: Vec<_> = boxes
+            .iter()
+            .map(|b| (*b, image::Rgb([255, 40, 40])))
+            .collect();
+        vpcal_video::draw::save_png(&vpcal_video::draw::draw_boxes(image, &colored), path)?;
+    }
     let summary = json!({
         "input": a.input.display().to_string(),
         "image_size": [info.width, info.height],
