@@ -15,7 +15,12 @@ JSON object.
 import argparse
 import csv
 import json
+import os
+import sys
 from collections import defaultdict
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from yolox_goldens import iou  # noqa: E402
 
 
 def read(path):
@@ -24,14 +29,6 @@ def read(path):
         for r in csv.DictReader(f):
             rows[int(r["frame"])].append(tuple(float(r[k]) for k in ("x0", "y0", "x1", "y1")))
     return rows
-
-
-def iou(a, b):
-    iw = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
-    ih = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
-    inter = iw * ih
-    u = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
-    return inter / u if u > 0 else 0.0
 
 
 def match(truth, dets, thr):

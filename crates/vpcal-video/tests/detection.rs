@@ -3,6 +3,8 @@
 //! in `$VPCAL_DATA` (skipped when absent).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use image::{GrayImage, Rgb, RgbImage};
@@ -20,19 +22,7 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn data_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("VPCAL_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"))
-        });
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("SKIP: no data at {}", dir.display());
-        None
-    }
-}
+use common::data_dir;
 
 // ---------------------------------------------------------------- synthetic traffic scene
 

@@ -4,6 +4,8 @@
 #![cfg(feature = "onnx")]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use image::{Rgb, RgbImage};
@@ -112,24 +114,11 @@ fn a_file_that_is_not_onnx_is_refused() {
 // ------------------------------------------------- the bundled YOLOX-nano against onnxruntime
 
 mod yolox {
+    use super::common::data_dir;
     use super::*;
     use vpcal_video::detect::yolox::{
         Region, YoloxConfig, YoloxDetector, BUNDLED_YOLOX, BUNDLED_YOLOX_SHA1,
     };
-
-    fn data_dir() -> Option<PathBuf> {
-        let dir = std::env::var_os("VPCAL_DATA")
-            .map(PathBuf::from)
-            .unwrap_or_else(|| {
-                PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"))
-            });
-        if dir.is_dir() {
-            Some(dir)
-        } else {
-            eprintln!("SKIP: no data at {}", dir.display());
-            None
-        }
-    }
 
     fn golden() -> serde_json::Value {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/yolox.json");

@@ -219,7 +219,7 @@ fn parse_detector(s: &str) -> Result<DetectorChoice, String> {
     }
 }
 
-fn parse_start(s: &str) -> Result<Start, String> {
+pub fn parse_start(s: &str) -> Result<Start, String> {
     s.parse::<Start>().map_err(|e| e.to_string())
 }
 

@@ -1,8 +1,8 @@
 //! `vpcal demo`: the whole method on a synthetic clip whose camera is known.
 //!
 //! Renders a seeded traffic scene (`vpcal-synth`), runs the `calibrate` pipeline on its video
-//! with the motion detector and the bundled model, and compares the result with the true
-//! camera: focal length, horizon, and the BrnoCompSpeed pure-calibration ratio error of the
+//! with the default (learned) vehicle detector and the bundled model, and compares the result
+//! with the true camera: focal length, horizon, and the BrnoCompSpeed pure-calibration ratio error of the
 //! scene's ground-truth road distances.
 
 use std::path::PathBuf;
@@ -35,7 +35,7 @@ pub struct Args {
     /// Frame size WxH.
     #[arg(long, value_parser = super::args::size, default_value = "1280x720")]
     pub size: (u32, u32),
-    /// Use the scene's true vehicle boxes instead of the motion detector.
+    /// Use the scene's true vehicle boxes instead of a detector.
     #[arg(long)]
     pub true_boxes: bool,
     #[command(flatten)]

@@ -12,7 +12,7 @@ use serde_json::json;
 use vpcal_video::detect::file::write_detections;
 use vpcal_video::{SourceOptions, Start};
 
-use super::calibrate::{check_destination, open_detector, DetectorArgs};
+use super::calibrate::{check_destination, open_detector, parse_start, DetectorArgs};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -42,10 +42,6 @@ pub struct Args {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
-}
-
-fn parse_start(s: &str) -> Result<Start, String> {
-    s.parse::<Start>().map_err(|e| e.to_string())
 }
 
 pub fn run(a: Args) -> Result<()> {
