@@ -57,7 +57,7 @@ def area_weights(src_len, offset, length, out_len):
         a = offset + i * s
         b = offset + (i + 1) * s
         j0 = int(np.floor(a))
-        j1 = int(np.ceil(b))
+        j1 = min(int(np.ceil(b)), offset + length)  # b may overshoot by a rounding error
         for j in range(j0, j1):
             ov = min(b, j + 1) - max(a, j)
             if ov > 0 and 0 <= j < src_len:

@@ -212,7 +212,8 @@ fn area_weights(offset: u32, length: u32, out_len: u32) -> Vec<(usize, Vec<f32>)
             let a = f64::from(offset) + f64::from(i) * s;
             let b = a + s;
             let j0 = a.floor() as usize;
-            let j1 = b.ceil() as usize;
+            // `b` may exceed the region's end by a rounding error.
+            let j1 = (b.ceil() as usize).min((offset + length) as usize);
             let w = (j0..j1)
                 .map(|j| {
                     let ov = b.min(j as f64 + 1.0) - a.max(j as f64);

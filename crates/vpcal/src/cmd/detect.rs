@@ -29,6 +29,9 @@ pub struct Args {
     /// Stop after this many processed frames.
     #[arg(long, value_name = "N")]
     pub max_frames: Option<u64>,
+    /// Frame rate of an image folder of consecutive frames (see `calibrate --fps`).
+    #[arg(long, value_name = "FPS")]
+    pub fps: Option<f64>,
     /// Where to start: a frame index (`120`) or a time (`4.5s`).
     #[arg(long, value_parser = parse_start)]
     pub start: Option<Start>,
@@ -53,6 +56,7 @@ pub fn run(a: Args) -> Result<()> {
         every: a.every,
         max_frames: a.max_frames,
         start: a.start.unwrap_or_default(),
+        image_fps: a.fps,
         ..SourceOptions::default()
     };
     options
