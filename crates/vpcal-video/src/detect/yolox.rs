@@ -546,6 +546,14 @@ impl YoloxDetector {
         Ok(det)
     }
 
+    /// An error about this model.
+    fn error(&self, message: String) -> VideoError {
+        VideoError::Model {
+            path: self.label.clone().into(),
+            message,
+        }
+    }
+
     /// The side of the model's square input.
     pub fn input_size(&self) -> u32 {
         self.input
@@ -563,10 +571,7 @@ impl YoloxDetector {
 
     fn run(&self, input: &[f32]) -> Result<Vec<f32>> {
         let n = self.input as usize;
-        let err = |what: &str, e: String| VideoError::Model {
-            path: self.label.clone().into(),
-            message: format!("{what}: {e}"),
-        };
+        let err = |what: &str, e: String| self.error(format!("{what}: {e}"));
         let tensor = Tensor::from_shape(&[1, 3, n, n], input)
             .map_err(|e| err("cannot build the input", e.to_string()))?;
         let outputs = self
@@ -601,10 +606,7 @@ impl YoloxDetector {
             &self.config.classes,
             self.config.min_score,
         )
-        .map_err(|e| VideoError::Model {
-            path: self.label.clone().into(),
-            message: format!("unexpected model output: {e}"),
-        })?;
+        .map_err(|e| self.error(format!("unexpected model output: {e}")))?;
         Ok((lb, cands))
     }
 
@@ -661,14 +663,7 @@ impl Detector for YoloxDetector {
         });
         let passes = passes
             .into_iter()
-            .map(|p| {
-                p.unwrap_or_else(|| {
-                    Err(VideoError::Model {
-                        path: self.label.clone().into(),
-                        message: "a detector thread panicked".into(),
-                    })
-                })
-            })
+            .map(|p| p.unwrap_or_else(|| Err(self.error("a detector thread panicked".into()))))
             .collect::<Result<Vec<Pass>>>()?;
         Ok(merge_passes(
             passes,

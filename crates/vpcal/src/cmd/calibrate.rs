@@ -102,21 +102,8 @@ pub struct PipelineArgs {
     /// first 3 seconds would otherwise give no vehicles).
     #[arg(long)]
     pub no_replay: bool,
-    /// Process every K-th frame.
-    #[arg(long, default_value_t = 1, value_name = "K")]
-    pub every: u64,
-    /// Stop after this many processed frames.
-    #[arg(long, value_name = "N")]
-    pub max_frames: Option<u64>,
-    /// Frame rate of an image folder: its pictures are then consecutive frames, treated as a
-    /// video (times, tracks and speeds need it). Without it a folder is a set of stills of one
-    /// camera, and a vehicle at the same place in several of them counts once. Videos carry
-    /// their own rate.
-    #[arg(long, value_name = "FPS")]
-    pub fps: Option<f64>,
-    /// Where to start: a frame index (`120`) or a time (`4.5s`).
-    #[arg(long, value_parser = parse_start)]
-    pub start: Option<Start>,
+    #[command(flatten)]
+    pub frames: FrameArgs,
     #[command(flatten)]
     pub detect: DetectorArgs,
     /// Drop boxes whose detector score is not above this.
@@ -140,6 +127,57 @@ pub struct PipelineArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// Which frames of the input are processed.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FrameArgs {
+    /// Process every K-th frame.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub every: u64,
+    /// Stop after this many processed frames.
+    #[arg(long, value_name = "N")]
+    pub max_frames: Option<u64>,
+    /// Frame rate of an image folder: its pictures are then consecutive frames, treated as a
+    /// video (times, tracks and speeds need it). Without it a folder is a set of stills of one
+    /// camera, and a vehicle at the same place in several of them counts once. Videos carry
+    /// their own rate.
+    #[arg(long, value_name = "FPS")]
+    pub fps: Option<f64>,
+    /// Where to start: a frame index (`120`) or a time (`4.5s`).
+    #[arg(long, value_parser = parse_start)]
+    pub start: Option<Start>,
+}
+
+impl FrameArgs {
+    /// The frame selection as source options.
+    pub fn options(&self) -> SourceOptions {
+        SourceOptions {
+            every: self.every,
+            max_frames: self.max_frames,
+            start: self.start.unwrap_or_default(),
+            image_fps: self.fps,
+            ..SourceOptions::default()
+        }
+    }
+
+    /// Opens `input` with this selection, checked (a bad selection, or `--fps` for a video,
+    /// is an error naming the flag).
+    pub fn open(&self, input: &Path) -> Result<Box<dyn vpcal_video::FrameSource>> {
+        let options = self.options();
+        options
+            .validate()
+            .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;
+        let source = vpcal_video::open_source(input, &options)
+            .with_context(|| format!("opening {}", input.display()))?;
+        if self.fps.is_some() && source.info().kind == SourceKind::Video {
+            bail!(
+                "--fps applies to image folders; the video {} has its own frame rate",
+                input.display()
+            );
+        }
+        Ok(source)
+    }
 }
 
 /// Which vehicle detector, and its settings.
@@ -220,7 +258,7 @@ fn parse_detector(s: &str) -> Result<DetectorChoice, String> {
     }
 }
 
-pub fn parse_start(s: &str) -> Result<Start, String> {
+fn parse_start(s: &str) -> Result<Start, String> {
     s.parse::<Start>().map_err(|e| e.to_string())
 }
 
@@ -529,27 +567,11 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     if a.batch == 0 {
         bail!("--batch must be at least 1");
     }
-    let options = SourceOptions {
-        every: a.every,
-        max_frames: a.max_frames,
-        start: a.start.unwrap_or_default(),
-        image_fps: a.fps,
-        ..SourceOptions::default()
-    };
-    options
-        .validate()
-        .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;
+    let options = a.frames.options();
+    let mut source = a.frames.open(input)?;
     let (net, model) = load_model(a.model.as_deref(), &a.device)?;
     let net = net.with_flip_average(a.flip_average);
-    let mut source = vpcal_video::open_source(input, &options)
-        .with_context(|| format!("opening {}", input.display()))?;
     let info = source.info().clone();
-    if a.fps.is_some() && info.kind == SourceKind::Video {
-        bail!(
-            "--fps applies to image folders; the video {} has its own frame rate",
-            input.display()
-        );
-    }
     let mut detector = open_detector(&a.detect, &info)?;
     let detector_name = detector.name();
     let mut stages = Stages::new(&net, a)?;
@@ -594,7 +616,9 @@ pub fn run_pipeline(input: &Path, a: &PipelineArgs) -> Result<PipelineOutput> {
     };
     if let Some((until, mut replay)) = replay {
         pb.inc_length(learning_frames);
-        let mut source = vpcal_video::open_source(input, &options)
+        let mut source = a
+            .frames
+            .open(input)
             .with_context(|| format!("opening {} again", input.display()))?;
         let mut filter = stages.filter(&info);
         for frame in source.by_ref() {
@@ -662,7 +686,7 @@ pub fn resolve_detector(a: &DetectorArgs) -> DetectorChoice {
     }
 }
 
-/// The detector the flags ask for (see [`PipelineArgs::detector`]).
+/// The detector the flags ask for (see [`DetectorArgs::detector`]).
 pub fn open_detector(a: &DetectorArgs, info: &SourceInfo) -> Result<Box<dyn Detector>> {
     use vpcal_video::detect::{YoloxConfig, YoloxDetector};
     if a.detections.is_some() && a.detector != DetectorChoice::Auto {
@@ -672,16 +696,15 @@ pub fn open_detector(a: &DetectorArgs, info: &SourceInfo) -> Result<Box<dyn Dete
     if a.road_mask.is_some() && choice != DetectorChoice::Motion {
         bail!("--road-mask applies to the motion detector (--detector motion) only");
     }
-    let yolox_config = || {
-        let mut classes = vpcal_video::detect::yolox::COCO_CAR_BUS_TRUCK.to_vec();
-        if a.motorcycles {
-            classes.push(vpcal_video::detect::yolox::COCO_MOTORCYCLE);
-        }
-        YoloxConfig {
-            classes,
-            tiles: a.tiles.unwrap_or_else(|| default_tiles(info.width)),
-            ..YoloxConfig::default()
-        }
+    // COCO classes that count as vehicles, for both kinds of learned detector.
+    let mut classes = vpcal_video::detect::yolox::COCO_CAR_BUS_TRUCK.to_vec();
+    if a.motorcycles {
+        classes.push(vpcal_video::detect::yolox::COCO_MOTORCYCLE);
+    }
+    let yolox_config = || YoloxConfig {
+        classes: classes.clone(),
+        tiles: a.tiles.unwrap_or_else(|| default_tiles(info.width)),
+        ..YoloxConfig::default()
     };
     match choice {
         DetectorChoice::File(path) => Ok(Box::new(FileDetector::open(&path)?)),
@@ -692,13 +715,9 @@ pub fn open_detector(a: &DetectorArgs, info: &SourceInfo) -> Result<Box<dyn Dete
             Ok(Box::new(YoloxDetector::open(&path, yolox_config())?))
         }
         DetectorChoice::Onnx(path) => {
-            let mut classes = vpcal_video::detect::onnx::COCO_VEHICLES.to_vec();
-            if !a.motorcycles {
-                classes.retain(|&c| c != vpcal_video::detect::yolox::COCO_MOTORCYCLE);
-            }
             let config = vpcal_video::detect::OnnxConfig {
                 layout: a.onnx_layout,
-                classes: Some(classes),
+                classes: Some(classes.clone()),
                 ..vpcal_video::detect::OnnxConfig::default()
             };
             Ok(Box::new(vpcal_video::detect::OnnxDetector::open(
@@ -813,10 +832,10 @@ fn settings_json(out: &PipelineOutput, a: &PipelineArgs) -> Value {
         "model": out.model,
         "device": a.device,
         "detector": out.detector,
-        "every": a.every,
-        "fps": a.fps,
-        "max_frames": a.max_frames,
-        "start": a.start.map(|s| format!("{s:?}")),
+        "every": a.frames.every,
+        "fps": a.frames.fps,
+        "max_frames": a.frames.max_frames,
+        "start": a.frames.start.map(|s| format!("{s:?}")),
         "min_score": a.min_score,
         "drop_static": !a.keep_static,
         "max_per_frame": a.max_per_frame,

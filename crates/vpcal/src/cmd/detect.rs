@@ -10,9 +10,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde_json::json;
 use vpcal_video::detect::file::write_detections;
-use vpcal_video::{SourceOptions, Start};
 
-use super::calibrate::{check_destination, open_detector, parse_start, DetectorArgs};
+use super::calibrate::{check_destination, open_detector, DetectorArgs, FrameArgs};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -23,18 +22,8 @@ pub struct Args {
     pub output: PathBuf,
     #[command(flatten)]
     pub detect: DetectorArgs,
-    /// Process every K-th frame.
-    #[arg(long, default_value_t = 1, value_name = "K")]
-    pub every: u64,
-    /// Stop after this many processed frames.
-    #[arg(long, value_name = "N")]
-    pub max_frames: Option<u64>,
-    /// Frame rate of an image folder of consecutive frames (see `calibrate --fps`).
-    #[arg(long, value_name = "FPS")]
-    pub fps: Option<f64>,
-    /// Where to start: a frame index (`120`) or a time (`4.5s`).
-    #[arg(long, value_parser = parse_start)]
-    pub start: Option<Start>,
+    #[command(flatten)]
+    pub frames: FrameArgs,
     /// Also draw the boxes of the processed frame with the most of them (PNG), to check the
     /// detector by eye.
     #[arg(long, value_name = "PNG")]
@@ -52,18 +41,8 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(p) = &a.picture {
         check_destination("--picture", p)?;
     }
-    let options = SourceOptions {
-        every: a.every,
-        max_frames: a.max_frames,
-        start: a.start.unwrap_or_default(),
-        image_fps: a.fps,
-        ..SourceOptions::default()
-    };
-    options
-        .validate()
-        .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;
-    let mut source = vpcal_video::open_source(&a.input, &options)
-        .with_context(|| format!("opening {}", a.input.display()))?;
+    let options = a.frames.options();
+    let mut source = a.frames.open(&a.input)?;
     let info = source.info().clone();
     let mut detector = open_detector(&a.detect, &info)?;
     let pb = super::progress_bar(info.expected_frames(&options), "frames", a.quiet);
