@@ -75,12 +75,12 @@ pub fn read_json(path: &Path) -> Result<Json, FormatError> {
     })
 }
 
-/// Serialise `value` Python-style and write it atomically.
+/// Serialise `value` as strict JSON (non-finite numbers as `null`) and write it atomically.
 ///
 /// # Errors
 /// [`FormatError::Io`] naming `path`.
 pub fn write_json(path: &Path, value: &Json) -> Result<(), FormatError> {
-    let mut text = value.to_python_string();
+    let mut text = value.to_strict_string();
     text.push('\n');
     write_atomic(path, text.as_bytes())
 }

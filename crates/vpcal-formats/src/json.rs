@@ -6,6 +6,10 @@
 //! type whose numbers are plain `f64`, a parser that accepts the three tokens, and a writer
 //! that emits them back, so such files round-trip without loss.
 //!
+//! vpcal's own files are strict JSON ([`Json::to_strict_string`]): a non-finite number is
+//! written as `null`, and [`Json::as_f64`] reads `null` back as NaN (unknown, or at infinity),
+//! so strict parsers (browsers, Node, `jq`) read everything vpcal writes.
+//!
 //! Typed accessors ([`Json::field`], [`Json::as_f64`], [`Json::as_point`], ...) return
 //! [`AccessError`]s that name what was expected and what was found; readers add the file and
 //! the item.
@@ -341,13 +345,15 @@ impl Json {
         }
     }
 
-    /// A number (possibly non-finite) at `path`.
+    /// A number (possibly non-finite) at `path`; `null`, the strict-JSON spelling of a
+    /// non-finite number, reads as NaN.
     ///
     /// # Errors
-    /// When `self` is not a number.
+    /// When `self` is neither a number nor `null`.
     pub fn as_f64(&self, path: &str) -> Result<f64, AccessError> {
         match self {
             Json::Number(n) => Ok(*n),
+            Json::Null => Ok(f64::NAN),
             _ => Err(self.expected(path, "a number")),
         }
     }
@@ -414,14 +420,23 @@ impl Json {
     /// non-finite numbers as `Infinity`, `-Infinity` and `NaN`.
     pub fn to_python_string(&self) -> String {
         let mut out = String::new();
-        self.write_python(&mut out);
+        self.write_python(&mut out, false);
         out
     }
 
-    fn write_python(&self, out: &mut String) {
+    /// Serialise like [`Json::to_python_string`] but as strict JSON: non-finite numbers are
+    /// written as `null` (what vpcal writes to its files).
+    pub fn to_strict_string(&self) -> String {
+        let mut out = String::new();
+        self.write_python(&mut out, true);
+        out
+    }
+
+    fn write_python(&self, out: &mut String, strict: bool) {
         match self {
             Json::Null => out.push_str("null"),
             Json::Bool(b) => out.push_str(if *b { "true" } else { "false" }),
+            Json::Number(n) if strict && !n.is_finite() => out.push_str("null"),
             Json::Number(n) => write_number(out, *n),
             Json::String(s) => write_string(out, s),
             Json::Array(items) => {
@@ -430,7 +445,7 @@ impl Json {
                     if i > 0 {
                         out.push_str(", ");
                     }
-                    v.write_python(out);
+                    v.write_python(out, strict);
                 }
                 out.push(']');
             }
@@ -442,7 +457,7 @@ impl Json {
                     }
                     write_string(out, k);
                     out.push_str(": ");
-                    v.write_python(out);
+                    v.write_python(out, strict);
                 }
                 out.push('}');
             }
@@ -525,6 +540,22 @@ mod tests {
         );
         let again = parse(&text).unwrap();
         assert_eq!(again.to_python_string(), text);
+    }
+
+    #[test]
+    fn strict_output_writes_null_and_reads_back_as_nan() {
+        let v = Json::Array(vec![
+            Json::Number(f64::INFINITY),
+            Json::Number(f64::NAN),
+            Json::Number(-2.5),
+        ]);
+        let text = v.to_strict_string();
+        assert_eq!(text, "[null, null, -2.5]");
+        let back = parse(&text).unwrap().as_f64_vec("").unwrap();
+        assert!(back[0].is_nan() && back[1].is_nan());
+        assert_eq!(back[2], -2.5);
+        // serde_json, a strict parser, reads it.
+        assert!(serde_json::from_str::<serde_json::Value>(&text).is_ok());
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! File formats for vpcal. Every reader names the file (and the item and field) in its errors;
 //! every writer writes atomically (temporary file, then rename).
 //!
-//! - [`json`]: JSON with Python's `Infinity`/`NaN` tokens, read and written without loss.
+//! - [`calib`]: vpcal's calibration file (`calib.json`), typed and versioned.
+//! - [`json`]: JSON with Python's `Infinity`/`NaN` tokens (read; vpcal writes strict JSON).
 //! - [`pickle`]: a safe Python-pickle reader (no code execution; numpy arrays and scalars).
 //! - [`bcs`]: BrnoCompSpeed ground truth (`gt_data.pkl` / `gt_data.json`) and system files.
 //! - [`bcp`]: BrnoCarPark ground truth (`gt_pairs.json`).
@@ -10,6 +11,7 @@
 
 pub mod bcp;
 pub mod bcs;
+pub mod calib;
 mod error;
 pub mod fs;
 pub mod json;

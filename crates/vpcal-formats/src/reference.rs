@@ -6,7 +6,7 @@
 //! "vp_box": [y_min, x_min, y_max, x_max] (integer pixels), "score", "frame_cnt",
 //! "vp1_var", "vp2_var", "pred_vps": [[vp1x, vp1y, vp2x, vp2y] per scale] (box frame),
 //! "pred_vars": [[D_vp1, D_vp2] per scale], "vp1_box", "vp2_box", "vp1", "vp2" (frame pixels)}`.
-//! Numbers may be `Infinity` or `NaN`. Note that the reference's `vp2_var` is not VP2's spread
+//! Numbers may be `Infinity` or `NaN` (the reference's files); vpcal writes them as `null`. Note that the reference's `vp2_var` is not VP2's spread
 //! (it indexes VP1's column); [`VpOutItem::vp2_spread`] reads the right one from `pred_vars`.
 //!
 //! vpcal adds `"edgelets": [[x, y, angle, strength], ...]` (frame pixels, radians) to the items
@@ -160,10 +160,13 @@ impl VpOutItem {
             vp2_box: point("vp2_box")?,
             pred_vps,
             pred_vars,
-            vp1_var: opt("vp1_var")
+            // A present null is a non-finite spread (strict JSON), not an absent one.
+            vp1_var: item
+                .get("vp1_var")
                 .map(|v| v.as_f64(&path("vp1_var")))
                 .transpose()?,
-            vp2_var: opt("vp2_var")
+            vp2_var: item
+                .get("vp2_var")
                 .map(|v| v.as_f64(&path("vp2_var")))
                 .transpose()?,
             edgelets,
@@ -241,7 +244,7 @@ pub fn read_vpout(path: &Path) -> Result<Vec<VpOutItem>, FormatError> {
         .collect()
 }
 
-/// Write a `VPout` file atomically (non-finite numbers as `Infinity`/`NaN`, as Python does).
+/// Write a `VPout` file atomically, as strict JSON (non-finite numbers as `null`, read back as NaN).
 ///
 /// # Errors
 /// [`FormatError::Io`] naming the file.
@@ -250,6 +253,60 @@ pub fn write_vpout(path: &Path, items: &[VpOutItem]) -> Result<(), FormatError> 
         path,
         &Json::Array(items.iter().map(VpOutItem::to_json).collect()),
     )
+}
+
+/// The frame size `(width, height)` the items' boxes were measured in, from each box in
+/// both forms (normalised `box` and pixel `vp_box`): the reference truncates
+/// (`x_min = int(W·xmin)`, `x_max = int(W·xmax + 1)`), vpcal writes exact quotients; each box
+/// bounds `W` and `H` to an interval, and the size is the one integer in all of them.
+///
+/// # Errors
+/// A message when the items have no boxes in both forms, or their bounds leave no integer or
+/// several.
+pub fn infer_image_size(items: &[VpOutItem]) -> Result<(u32, u32), String> {
+    // Bounds [lo, hi] on W (index 0) and H (index 1).
+    let mut bounds = [[0.0f64, f64::INFINITY]; 2];
+    let mut used = 0usize;
+    for item in items {
+        let (Some(n), Some(px)) = (item.box_norm, item.vp_box) else {
+            continue;
+        };
+        // n and px are [y0, x0, y1, x1]; axis 0 is x (W), 1 is y (H).
+        for (axis, (lo_i, hi_i)) in [(0usize, (1usize, 3usize)), (1, (0, 2))] {
+            let b = &mut bounds[axis];
+            if n[lo_i] > 0.01 {
+                b[0] = b[0].max(px[lo_i] / n[lo_i]);
+                b[1] = b[1].min((px[lo_i] + 1.0) / n[lo_i]);
+            }
+            if n[hi_i] > 0.01 {
+                b[0] = b[0].max((px[hi_i] - 1.0) / n[hi_i]);
+                b[1] = b[1].min(px[hi_i] / n[hi_i]);
+            }
+        }
+        used += 1;
+    }
+    if used == 0 {
+        return Err("no item has its box both normalised (`box`) and in pixels (`vp_box`)".into());
+    }
+    let mut size = [0u32; 2];
+    for (axis, name) in [(0, "width"), (1, "height")] {
+        let [lo, hi] = bounds[axis];
+        // Rounding in the files: a relative margin of 1e-9.
+        let first = (lo * (1.0 - 1e-9)).ceil();
+        let last = (hi * (1.0 + 1e-9)).floor();
+        if !(first.is_finite() && last.is_finite()) || first > last {
+            return Err(format!(
+                "the boxes of {used} items agree on no frame {name} (bounds {lo:.2}-{hi:.2} px)"
+            ));
+        }
+        if first < last {
+            return Err(format!(
+                "the boxes of {used} items leave the frame {name} between {first} and {last} px"
+            ));
+        }
+        size[axis] = first as u32;
+    }
+    Ok((size[0], size[1]))
 }
 
 /// One frame of the reference's `detections.json`.
@@ -322,4 +379,77 @@ pub fn read_detections(path: &Path) -> Result<Vec<ReferenceDetections>, FormatEr
         out.push(d);
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn item(box_norm: [f64; 4], vp_box: [f64; 4]) -> VpOutItem {
+        VpOutItem {
+            frame_cnt: 0.0,
+            score: 0.9,
+            vp1: Point2::new(0.0, 0.0),
+            vp2: Point2::new(1.0, 0.0),
+            box_norm: Some(box_norm),
+            box_center: None,
+            box_scale: None,
+            vp_box: Some(vp_box),
+            vp1_box: None,
+            vp2_box: None,
+            pred_vps: Vec::new(),
+            pred_vars: Vec::new(),
+            vp1_var: None,
+            vp2_var: None,
+            edgelets: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_image_size_follows_from_boxes_in_both_conventions() {
+        let (w, h) = (320.0f64, 240.0f64);
+        // vpcal's exact quotients.
+        let ours: Vec<VpOutItem> = [[12.0, 30.0, 80.0, 95.0], [100.0, 150.0, 160.0, 239.0]]
+            .iter()
+            .map(|b| item([b[0] / h, b[1] / w, b[2] / h, b[3] / w], *b))
+            .collect();
+        assert_eq!(infer_image_size(&ours), Ok((320, 240)));
+        // The reference's truncation, from normalised boxes of a 1920x1080 frame.
+        let (w, h) = (1920.0f64, 1080.0f64);
+        let reference: Vec<VpOutItem> = [
+            [0.3012, 0.4121, 0.4577, 0.5333],
+            [0.1234, 0.0567, 0.2401, 0.1999],
+            [0.6001, 0.7003, 0.8888, 0.9111],
+        ]
+        .iter()
+        .map(|n| {
+            let px = [
+                (h * n[0]).floor(),
+                (w * n[1]).floor(),
+                (h * n[2] + 1.0).floor(),
+                (w * n[3] + 1.0).floor(),
+            ];
+            item(*n, px)
+        })
+        .collect();
+        assert_eq!(infer_image_size(&reference), Ok((1920, 1080)));
+        // One small box leaves several sizes; none at all, an error.
+        let e = infer_image_size(
+            &reference[..1]
+                .iter()
+                .map(|i| VpOutItem {
+                    box_norm: Some([0.3, 0.4, 0.45, 0.5]),
+                    vp_box: Some([3.0, 4.0, 5.0, 5.0]),
+                    ..i.clone()
+                })
+                .collect::<Vec<_>>(),
+        )
+        .unwrap_err();
+        assert!(e.contains("between"), "{e}");
+        let bare = VpOutItem {
+            box_norm: None,
+            ..ours[0].clone()
+        };
+        assert!(infer_image_size(&[bare]).unwrap_err().contains("no item"));
+    }
 }

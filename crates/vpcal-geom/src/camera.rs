@@ -18,8 +18,28 @@
 //! Two VPs fix `f` (given `pp`), the horizon, the road normal and the camera rotation against
 //! the road. They do not fix the camera height: distances are known up to one scale factor,
 //! which needs one known road distance ([`Calibration::scale_from_distance`]).
+//!
+//! # The road frame (OpenCV exports)
+//! [`Calibration::road_frame`] is the physical frame of the road for `cv2.projectPoints`: origin
+//! on the road right under the camera, x along the traffic (towards vp1, away from the camera),
+//! z up (out of the road, towards the camera), y = z × x; the camera stands
+//! [`Calibration::plane_distance`] plane units above the origin (times a BCS scale: metres).
+//! Unlike the BCS back-projection its road lies in front of the camera; distances are the same.
 
 use crate::point::{cross, dot3, normalize3, Line, Point2};
+use crate::rotation::{mat_t_vec, Mat3};
+
+/// The constant of the BCS road plane `n·X + 10 = 0` (module docs).
+pub const BCS_PLANE_OFFSET: f64 = 10.0;
+
+/// The road frame of an export (module docs): `X_cam = rotation · X_road + translation`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RoadFrame {
+    /// Road to camera; its columns are the road axes in camera coordinates.
+    pub rotation: Mat3,
+    /// The road origin in camera coordinates, plane units (multiply by a scale for metres).
+    pub translation: [f64; 3],
+}
 
 /// Why no camera could be computed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -166,7 +186,7 @@ impl Calibration {
     pub fn project_to_road(&self, p: Point2) -> Option<[f64; 3]> {
         let c = [self.pp.x, self.pp.y, 0.0];
         let r = [p.x - self.pp.x, p.y - self.pp.y, self.focal_px];
-        let t = -(dot3(self.road_normal, c) + 10.0) / dot3(self.road_normal, r);
+        let t = -(dot3(self.road_normal, c) + BCS_PLANE_OFFSET) / dot3(self.road_normal, r);
         let x = [c[0] + t * r[0], c[1] + t * r[1], c[2] + t * r[2]];
         x.iter().all(|v| v.is_finite()).then_some(x)
     }
@@ -207,5 +227,79 @@ impl Calibration {
     pub fn sees_road(&self, p: Point2) -> bool {
         let r = [p.x - self.pp.x, p.y - self.pp.y, self.focal_px];
         dot3(self.road_normal, r) > 0.0
+    }
+
+    /// Distance from the camera centre to the road, plane units: the BCS back-projection's
+    /// `|n·C + 10|` with `C = (px, py, 0)`. A BCS `scale` times this is the camera's height
+    /// above the road in metres.
+    pub fn plane_distance(&self) -> f64 {
+        (dot3(self.road_normal, [self.pp.x, self.pp.y, 0.0]) + BCS_PLANE_OFFSET).abs()
+    }
+
+    /// The physical road frame (module docs), in plane units.
+    pub fn road_frame(&self) -> RoadFrame {
+        let n = self.road_normal;
+        let h = self.plane_distance();
+        // The road is on the side of n (`sees_road`), h away.
+        let z = [-n[0], -n[1], -n[2]];
+        let d1 = [
+            self.vp1.x - self.pp.x,
+            self.vp1.y - self.pp.y,
+            self.focal_px,
+        ];
+        // vp1's direction lies in the road plane; remove the rounding off it.
+        let along = dot3(d1, n);
+        let x = normalize3([
+            d1[0] - along * n[0],
+            d1[1] - along * n[1],
+            d1[2] - along * n[2],
+        ])
+        .unwrap_or([1.0, 0.0, 0.0]);
+        let y = cross(z, x);
+        RoadFrame {
+            rotation: [[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]],
+            translation: [h * n[0], h * n[1], h * n[2]],
+        }
+    }
+
+    /// Road-frame coordinates `(x, y)` (plane units, z = 0) of the road point pixel `p` sees;
+    /// `None` for pixels that do not see the road.
+    pub fn road_point(&self, p: Point2) -> Option<[f64; 2]> {
+        let r = [p.x - self.pp.x, p.y - self.pp.y, self.focal_px];
+        let n_r = dot3(self.road_normal, r);
+        if n_r.is_nan() || n_r <= 0.0 {
+            return None;
+        }
+        let lambda = self.plane_distance() / n_r;
+        let frame = self.road_frame();
+        let t = frame.translation;
+        let rel = [
+            lambda * r[0] - t[0],
+            lambda * r[1] - t[1],
+            lambda * r[2] - t[2],
+        ];
+        let q = mat_t_vec(&frame.rotation, rel);
+        (q[0].is_finite() && q[1].is_finite()).then_some([q[0], q[1]])
+    }
+
+    /// The pixel that sees road-frame point `(x, y)` (plane units), the inverse of
+    /// [`Calibration::road_point`]; `None` behind the camera.
+    pub fn pixel_of_road_point(&self, q: [f64; 2]) -> Option<Point2> {
+        let frame = self.road_frame();
+        let m = &frame.rotation;
+        let t = frame.translation;
+        let c = [
+            m[0][0] * q[0] + m[0][1] * q[1] + t[0],
+            m[1][0] * q[0] + m[1][1] * q[1] + t[1],
+            m[2][0] * q[0] + m[2][1] * q[1] + t[2],
+        ];
+        if c[2].is_nan() || c[2] <= 0.0 {
+            return None;
+        }
+        let p = Point2::new(
+            self.pp.x + self.focal_px * c[0] / c[2],
+            self.pp.y + self.focal_px * c[1] / c[2],
+        );
+        p.is_finite().then_some(p)
     }
 }

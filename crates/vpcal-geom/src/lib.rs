@@ -8,6 +8,8 @@
 //! - [`diamond`]: the diamond-space parametrisation of the projective plane.
 //! - [`heatmap`]: the multi-scale heatmap codec (targets, decoding, scale selection).
 //! - [`aggregate`]: per-vehicle VP pairs to one camera.
+//! - [`rotation`]: rotation matrices and rotation vectors (OpenCV's `rvec`).
+//! - [`solve`]: shared numerics (Nelder-Mead, SplitMix, medians, percentiles).
 //! - [`metrics`]: BrnoCompSpeed / BrnoCarPark calibration errors and summary statistics.
 //!
 //! # Conventions
@@ -24,5 +26,7 @@ pub mod diamond;
 pub mod heatmap;
 pub mod metrics;
 mod point;
+pub mod rotation;
+pub mod solve;
 
 pub use point::{cross, dot3, normalize3, BoxPx, Line, Point2};

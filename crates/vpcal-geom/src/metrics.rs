@@ -41,61 +41,7 @@ pub fn summarize(values: &[f64]) -> Option<Summary> {
     })
 }
 
-/// Percentile `q` (0-100) of sorted values with linear interpolation (numpy's default).
-/// NaN for an empty slice.
-pub fn percentile_sorted(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let pos = q / 100.0 * (sorted.len() - 1) as f64;
-    let lo = pos.floor() as usize;
-    let hi = pos.ceil() as usize;
-    let frac = pos - lo as f64;
-    if lo == hi {
-        sorted[lo]
-    } else {
-        sorted[lo] + (sorted[hi] - sorted[lo]) * frac
-    }
-}
-
-/// Median of finite values (mean of the two middle ones for an even count); `None` when empty.
-pub fn median(values: &[f64]) -> Option<f64> {
-    let mut v: Vec<f64> = values.iter().copied().filter(|x| !x.is_nan()).collect();
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    })
-}
-
-/// Weighted median: a minimiser of `Σ w_i |x - x_i|` (the lower one when the minimum is a
-/// segment). `None` when empty or when no weight is positive.
-pub fn weighted_median(values: &[f64], weights: &[f64]) -> Option<f64> {
-    let mut pairs: Vec<(f64, f64)> = values
-        .iter()
-        .zip(weights)
-        .filter(|(v, w)| v.is_finite() && w.is_finite() && **w > 0.0)
-        .map(|(v, w)| (*v, *w))
-        .collect();
-    if pairs.is_empty() {
-        return None;
-    }
-    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let total: f64 = pairs.iter().map(|p| p.1).sum();
-    let mut acc = 0.0;
-    for (v, w) in &pairs {
-        acc += w;
-        if acc >= total / 2.0 {
-            return Some(*v);
-        }
-    }
-    pairs.last().map(|p| p.0)
-}
+pub use crate::solve::{median, percentile_sorted, weighted_median};
 
 /// Road distances (plane units) of the measurements under `calib`; `None` when any pixel
 /// cannot be projected.

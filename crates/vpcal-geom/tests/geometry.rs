@@ -133,6 +133,64 @@ fn road_distances_match_a_known_camera_up_to_one_scale() {
 }
 
 #[test]
+fn the_road_frame_puts_the_camera_above_the_road_and_keeps_distances() {
+    let pp = Point2::new(640.0, 360.0);
+    let cam = TestCamera::new(1000.0, pp, 0.35, 0.03, 0.2);
+    let h = 8.0;
+    let project = |p: [f64; 3]| {
+        let c = cam.dir([p[0], p[1], p[2] - h]);
+        Point2::new(pp.x + cam.f * c[0] / c[2], pp.y + cam.f * c[1] / c[2])
+    };
+    let calib =
+        Calibration::from_vps(cam.vp([0.0, 1.0, 0.0]), cam.vp([1.0, 0.0, 0.0]), pp).unwrap();
+    let frame = calib.road_frame();
+    // The camera centre in road coordinates is (0, 0, +plane distance): above the road, z up.
+    let t = frame.translation;
+    let centre = vpcal_geom::rotation::mat_t_vec(&frame.rotation, [-t[0], -t[1], -t[2]]);
+    assert!(
+        centre[0].abs() < 1e-9 && centre[1].abs() < 1e-9,
+        "{centre:?}"
+    );
+    assert_relative_eq!(centre[2], calib.plane_distance(), max_relative = 1e-12);
+    // Road axes: x along the traffic (vp1), z up in the camera's world.
+    let up = cam.dir([0.0, 0.0, 1.0]);
+    let m = frame.rotation;
+    assert_relative_eq!(
+        m[0][2] * up[0] + m[1][2] * up[1] + m[2][2] * up[2],
+        1.0,
+        max_relative = 1e-9
+    );
+    let heading = cam.dir([0.0, 1.0, 0.0]);
+    assert_relative_eq!(
+        m[0][0] * heading[0] + m[1][0] * heading[1] + m[2][0] * heading[2],
+        1.0,
+        max_relative = 1e-9
+    );
+    // Road points of pixels: distances are the BCS ones, and the pixel comes back.
+    let (a, b) = (project([0.0, 20.0, 0.0]), project([3.0, 26.0, 0.0]));
+    let (qa, qb) = (calib.road_point(a).unwrap(), calib.road_point(b).unwrap());
+    let d = ((qa[0] - qb[0]).powi(2) + (qa[1] - qb[1]).powi(2)).sqrt();
+    assert_relative_eq!(d, calib.road_distance(a, b).unwrap(), max_relative = 1e-9);
+    // Scaled to metres, the plane distance becomes the true height h.
+    let s = calib
+        .scale_from_distance(a, b, (9.0f64 + 36.0).sqrt())
+        .unwrap();
+    assert_relative_eq!(s * calib.plane_distance(), h, max_relative = 1e-9);
+    let back = calib.pixel_of_road_point(qa).unwrap();
+    assert_relative_eq!(back.x, a.x, max_relative = 1e-9);
+    assert_relative_eq!(back.y, a.y, max_relative = 1e-9);
+    assert!(calib.road_point(Point2::new(640.0, -2000.0)).is_none());
+    // rvec round trip of the export.
+    let rvec = vpcal_geom::rotation::rotation_vector(&frame.rotation);
+    let again = vpcal_geom::rotation::rotation_matrix(rvec);
+    for i in 0..3 {
+        for j in 0..3 {
+            assert!((again[i][j] - m[i][j]).abs() < 1e-12);
+        }
+    }
+}
+
+#[test]
 fn degenerate_cameras_are_typed_errors() {
     let pp = Point2::new(960.5, 540.5);
     let inf = Point2::new(f64::INFINITY, 3.0);

@@ -19,25 +19,8 @@ pub fn relative_error(pred: Point2, truth: Point2) -> f64 {
     (pred - truth).norm() / n
 }
 
-/// Median of values (`+inf` allowed); `None` when empty.
-pub fn median(values: &[f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        let (a, b) = (v[n / 2 - 1], v[n / 2]);
-        if a.is_infinite() || b.is_infinite() {
-            b
-        } else {
-            (a + b) / 2.0
-        }
-    })
-}
+/// Median of values (`+inf` allowed, NaN ignored); `None` when empty.
+pub use vpcal_geom::solve::median;
 
 /// Accumulates relative VP errors over a validation pass.
 #[derive(Debug, Clone, Default)]

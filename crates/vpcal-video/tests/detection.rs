@@ -3,7 +3,7 @@
 //! in `$VPCAL_DATA` (skipped when absent).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -1,9 +1,10 @@
 //! `vpcal`: calibrate fixed traffic cameras from the vanishing points of the vehicles they see.
 //!
 //! A thin binary: flags are parsed by clap into one `Args` struct per subcommand (in `cmd/`),
-//! each subcommand validates its flags and calls the library crates. Errors are printed with
-//! their whole context chain and give exit code 1; bad flags give clap's exit code 2;
-//! `calibrate` and `demo` exit with 3 when the footage cannot support a calibration.
+//! each subcommand turns its flags into the library's settings, calls the library (`vpcal`,
+//! the other crates) and prints. Exit codes: 0 done; 1 an error (bad input, I/O), printed with
+//! its whole context chain; 2 a wrong command line; 3 the run completed but could not support
+//! a calibration (`calibrate`, `aggregate`, `demo`).
 
 mod cmd;
 
@@ -55,10 +56,10 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Calibrate(args) => return exit_code(cmd::calibrate::run(args)),
         Command::Demo(args) => return exit_code(cmd::demo::run(args)),
+        Command::Aggregate(args) => return exit_code(cmd::aggregate::run(args)),
         Command::Detect(args) => cmd::detect::run(args),
         Command::Scale(args) => cmd::measure::run_scale(args),
         Command::Measure(args) => cmd::measure::run_measure(args),
-        Command::Aggregate(args) => cmd::aggregate::run(args),
         Command::Data(args) => cmd::data::run(args),
         Command::Eval(args) => cmd::eval::run(args),
         Command::Synth(args) => cmd::synth::run(args),
@@ -66,13 +67,17 @@ fn main() -> std::process::ExitCode {
         Command::Predict(args) => cmd::predict::run(args),
         Command::BenchNet(args) => cmd::bench_net::run(args),
     };
-    exit_code(result.map(|()| std::process::ExitCode::SUCCESS))
+    exit_code(result.map(|()| cmd::Exit::Success))
 }
 
 /// The exit code of a subcommand's result; errors are printed with their context chain.
-fn exit_code(result: anyhow::Result<std::process::ExitCode>) -> std::process::ExitCode {
+fn exit_code(result: anyhow::Result<cmd::Exit>) -> std::process::ExitCode {
     match result {
-        Ok(code) => code,
+        Ok(exit) => exit.code(),
+        Err(err) if err.downcast_ref::<cmd::UsageError>().is_some() => {
+            eprintln!("error: {err:#}");
+            std::process::ExitCode::from(cmd::EXIT_USAGE)
+        }
         Err(err) => {
             eprintln!("error: {err:#}");
             std::process::ExitCode::FAILURE

@@ -3,9 +3,9 @@
 //! `VPCAL_DATA` (default `../shared/data` beside the repository) skip with a message when it
 //! is absent.
 
-mod common;
+use crate::common;
 
-use common::{real_data, stderr, stdout, vpcal};
+use common::{read_calibration, real_data, stderr, stdout, vpcal};
 use std::path::PathBuf;
 
 /// The real data root, when its `bcs` folder is there.
@@ -224,17 +224,29 @@ fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
         .unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let out_path = tmp.path().join("system.json");
+    let calib_path = tmp.path().join("calib.json");
     let out = vpcal(&[
         "aggregate",
         vpout.to_str().unwrap(),
         "--method",
         "reference",
         "--pp",
-        "960.5,540.5",
-        "-o",
+        "bcs",
+        "--bcs-json",
         out_path.to_str().unwrap(),
+        "-o",
+        calib_path.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
+    // The frame size came from the records' boxes.
+    assert!(
+        stderr(&out).contains("1920x1080 frames"),
+        "{}",
+        stderr(&out)
+    );
+    let calib = read_calibration(&calib_path);
+    assert_eq!(calib.pp, Some([960.5, 540.5]));
+    assert_eq!(calib.image_size, [1920, 1080]);
     let ours: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out_path).unwrap()).unwrap();
     let theirs: serde_json::Value =
@@ -298,14 +310,37 @@ fn bad_input_fails_with_one_line_naming_the_file_and_writes_nothing() {
             bad.to_str().unwrap(),
             "--method",
             method,
+            "--image-size",
+            "1920x1080",
             "-o",
             out_path.to_str().unwrap(),
         ]);
-        assert!(!out.status.success());
+        // Exit 3, as `calibrate`, with the reason in the calibration file.
+        assert_eq!(out.status.code(), Some(3), "{method}");
         let err = stderr(&out);
         assert!(err.contains("not enough evidence"), "{method}: {err}");
-        assert!(!out_path.exists());
+        let failed = read_calibration(&out_path);
+        assert_eq!(
+            failed.status,
+            vpcal_formats::calib::Status::NotEnoughEvidence
+        );
+        assert!(failed.reason.unwrap().contains("not enough evidence"));
+        std::fs::remove_file(&out_path).unwrap();
     }
+    // Records without boxes do not tell the frame size: the error names the flag.
+    let out = vpcal(&[
+        "aggregate",
+        bad.to_str().unwrap(),
+        "-o",
+        out_path.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("--image-size"), "{}", stderr(&out));
+    assert!(!out_path.exists());
+    // Without an output the result would be lost: a usage error before any work.
+    let out = vpcal(&["aggregate", bad.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("-o FILE"), "{}", stderr(&out));
     // A bad flag value is clap's error (exit code 2).
     let out = vpcal(&["aggregate", "x.json", "--pp", "1,2,3", "-o", "y.json"]);
     assert_eq!(out.status.code(), Some(2));

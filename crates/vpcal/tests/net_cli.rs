@@ -1,7 +1,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! End-to-end tests of `vpcal train` and `vpcal predict` on the toy data (no dataset needed).
 
-mod common;
+use crate::common;
 
 use common::{read_json, text, vpcal};
 

@@ -23,9 +23,10 @@
 //! [`fit_vp1`] does the same for VP1 with the edges *along* the vehicles, for inputs where no
 //! vehicle tracks give VP1.
 
-use super::robust::{line_angle_diff, nelder_mead, percentile, sd, SplitMix};
+use super::line_angle_diff;
 use super::tracks::Tangent;
 use crate::point::Point2;
+use crate::solve::{nelder_mead, percentile, sd, SplitMix};
 
 /// A short straight piece of an image edge: position (frame pixels), direction of the edge
 /// (radians, a line angle: `a` and `a + π` are the same), and gradient strength.
@@ -290,12 +291,12 @@ pub fn fit(
         }
     }
     let step0 = [0.05, 0.2f64.to_radians()];
-    let x = nelder_mead(|x| cost(&flat, &ones, vp1, pp, x, s), &best.1, &step0, 300);
+    let x = nelder_mead(|x| cost(&flat, &ones, vp1, pp, x, s), &best.1, &step0, 300).x;
     let mut rng = SplitMix(seed ^ 0xED6E_1E75);
     let (mut fs, mut rolls) = (vec![], vec![]);
     for _ in 0..opts.bootstrap {
         let w: Vec<f64> = (0..flat.groups).map(|_| rng.poisson1()).collect();
-        let xb = nelder_mead(|x| cost(&flat, &w, vp1, pp, x, s), &x, &step0, 150);
+        let xb = nelder_mead(|x| cost(&flat, &w, vp1, pp, x, s), &x, &step0, 150).x;
         fs.push(xb[0].exp());
         rolls.push(line_angle_diff(xb[1] - x[1]).to_degrees());
     }
@@ -390,7 +391,7 @@ pub fn fit_vp1(
         .iter()
         .fold(Point2::new(0.0, 0.0), |a, &i| a + point[i] / n);
     let d = 0.02 * (start - mean).norm().max(1.0);
-    let q = nelder_mead(cost, &[start.x, start.y], &[d, d], 400);
+    let q = nelder_mead(cost, &[start.x, start.y], &[d, d], 400).x;
     let vp1 = Point2::new(q[0], q[1]);
     vp1.is_finite().then_some((vp1, picked.len(), used))
 }
@@ -568,12 +569,12 @@ pub fn fit_curved(
         }
     }
     let step0 = [0.05, 0.3f64.to_radians(), 0.01 * height];
-    let x = nelder_mead(|x| full.cost(&weight, pp, x, s, ex1), &best.1, &step0, 400);
+    let x = nelder_mead(|x| full.cost(&weight, pp, x, s, ex1), &best.1, &step0, 400).x;
     let mut rng = SplitMix(seed ^ 0xC0C0_1E75);
     let (mut fs, mut rolls) = (vec![], vec![]);
     for _ in 0..opts.bootstrap.min(10) {
         let w: Vec<f64> = coarse_weight.iter().map(|cw| cw * rng.poisson1()).collect();
-        let xb = nelder_mead(|x| coarse.cost(&w, pp, x, s, ex1), &x, &step0, 150);
+        let xb = nelder_mead(|x| coarse.cost(&w, pp, x, s, ex1), &x, &step0, 150).x;
         fs.push(xb[0].exp());
         rolls.push(line_angle_diff(xb[1] - x[1]).to_degrees());
     }

@@ -14,6 +14,12 @@ pub mod tracks;
 
 use crate::point::{BoxPx, Point2};
 
+/// Wrap an angle difference of two lines (undirected) to (-pi/2, pi/2].
+pub(crate) fn line_angle_diff(a: f64) -> f64 {
+    let pi = std::f64::consts::PI;
+    a - pi * (a / pi).round()
+}
+
 /// One vehicle's evidence: its VP pair in frame pixels and what we know about its quality.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VehicleVps {

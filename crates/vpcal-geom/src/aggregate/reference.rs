@@ -47,30 +47,18 @@ pub struct ReferenceResult {
 
 /// Median ignoring NaN (numpy `nanmedian`); infinities sort normally. NaN when nothing is left.
 fn nan_median(values: impl IntoIterator<Item = f64>) -> f64 {
-    let mut v: Vec<f64> = values.into_iter().filter(|x| !x.is_nan()).collect();
-    median_sorted_in_place(&mut v)
+    let v: Vec<f64> = values.into_iter().collect();
+    crate::solve::median(&v).unwrap_or(f64::NAN)
 }
 
 /// Median propagating NaN (numpy `median`).
 fn plain_median(values: impl IntoIterator<Item = f64>) -> f64 {
-    let mut v: Vec<f64> = values.into_iter().collect();
+    // numpy's median: a NaN anywhere makes the median NaN.
+    let v: Vec<f64> = values.into_iter().collect();
     if v.iter().any(|x| x.is_nan()) {
         return f64::NAN;
     }
-    median_sorted_in_place(&mut v)
-}
-
-fn median_sorted_in_place(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
+    crate::solve::median(&v).unwrap_or(f64::NAN)
 }
 
 /// Apply the reference rule to `pairs` with principal point `pp`.

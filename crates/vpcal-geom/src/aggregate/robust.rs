@@ -62,10 +62,12 @@
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
 use super::edgelets::{self as edge, BoxEdgelets, CurvedVehicle, Edgelet, EdgeletFitOptions};
+use super::line_angle_diff;
 use super::tracks::{self, TrackLine, TrackOptions};
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
 use crate::point::{BoxPx, Line, Point2};
+use crate::solve::{nelder_mead, percentile, sd, SplitMix};
 
 /// Settings of the robust aggregation; `Default` is what vpcal uses.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -288,37 +290,6 @@ fn geman_mcclure(r: f64) -> f64 {
     r2 / (1.0 + r2)
 }
 
-/// A small deterministic PRNG (SplitMix64), so that the geometry crate needs no dependency.
-#[derive(Debug, Clone)]
-pub(super) struct SplitMix(pub(super) u64);
-
-impl SplitMix {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Poisson(1) count (inverse transform).
-    pub(super) fn poisson1(&mut self) -> f64 {
-        let u = self.next_f64();
-        let mut k = 0.0;
-        let mut p = (-1.0f64).exp();
-        let mut cdf = p;
-        while u > cdf && k < 20.0 {
-            k += 1.0;
-            p /= k;
-            cdf += p;
-        }
-        k
-    }
-}
-
 /// Per-vehicle data prepared for fitting (frame pixels).
 #[derive(Debug, Clone)]
 struct Prepared {
@@ -371,12 +342,6 @@ impl Prepared {
 fn unit(v: Point2) -> Option<Point2> {
     let n = v.norm();
     (n > 0.0 && n.is_finite()).then(|| v / n)
-}
-
-/// Wrap an angle difference of two lines to (-pi/2, pi/2].
-pub(super) fn line_angle_diff(a: f64) -> f64 {
-    let pi = std::f64::consts::PI;
-    a - pi * (a / pi).round()
 }
 
 /// Buckets of box indices by the grid cell of their centre, for fast overlap queries.
@@ -687,77 +652,9 @@ fn fit_vp1(
         &[q0[0], q0[1]],
         &[0.02, 0.02],
         300,
-    );
+    )
+    .x;
     Some(sphere([q[0], q[1]]))
-}
-
-/// Minimise `f` from `x0` with initial steps `step` (Nelder-Mead, standard coefficients).
-pub(super) fn nelder_mead(
-    f: impl Fn(&[f64]) -> f64,
-    x0: &[f64],
-    step: &[f64],
-    iters: usize,
-) -> Vec<f64> {
-    let n = x0.len();
-    let mut simplex: Vec<(Vec<f64>, f64)> = Vec::with_capacity(n + 1);
-    simplex.push((x0.to_vec(), f(x0)));
-    for i in 0..n {
-        let mut x = x0.to_vec();
-        x[i] += step[i];
-        let v = f(&x);
-        simplex.push((x, v));
-    }
-    for _ in 0..iters {
-        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-        let spread = (simplex[n].1 - simplex[0].1).abs();
-        if spread <= 1e-10 * (1.0 + simplex[0].1.abs()) {
-            break;
-        }
-        let mut centroid = vec![0.0; n];
-        for (x, _) in &simplex[..n] {
-            for (c, xi) in centroid.iter_mut().zip(x) {
-                *c += xi / n as f64;
-            }
-        }
-        let along = |t: f64| -> Vec<f64> {
-            centroid
-                .iter()
-                .zip(&simplex[n].0)
-                .map(|(c, w)| c + t * (w - c))
-                .collect()
-        };
-        let xr = along(-1.0);
-        let fr = f(&xr);
-        if fr < simplex[0].1 {
-            let xe = along(-2.0);
-            let fe = f(&xe);
-            simplex[n] = if fe < fr { (xe, fe) } else { (xr, fr) };
-        } else if fr < simplex[n - 1].1 {
-            simplex[n] = (xr, fr);
-        } else {
-            let xc = if fr < simplex[n].1 {
-                along(-0.5)
-            } else {
-                along(0.5)
-            };
-            let fc = f(&xc);
-            if fc < fr.min(simplex[n].1) {
-                simplex[n] = (xc, fc);
-            } else {
-                let best = simplex[0].0.clone();
-                for s in simplex.iter_mut().skip(1) {
-                    s.0 =
-                        s.0.iter()
-                            .zip(&best)
-                            .map(|(x, b)| b + 0.5 * (x - b))
-                            .collect();
-                    s.1 = f(&s.0);
-                }
-            }
-        }
-    }
-    simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-    simplex.swap_remove(0).0
 }
 
 /// The horizon model: VP1 (finite), pp, and the parameters (ln f, roll, bias).
@@ -879,7 +776,8 @@ impl Vp2Model<'_> {
             &x0,
             &[0.05, 0.2f64.to_radians(), 0.3f64.to_radians()],
             400,
-        );
+        )
+        .x;
         [x[0], x[1], x[2]]
     }
 }
@@ -946,7 +844,8 @@ fn fit_camera(
         &[q1[0], q1[1], x_rays[0], x_rays[1]],
         &[0.002, 0.002, 0.02, 0.1f64.to_radians()],
         600,
-    );
+    )
+    .x;
     let sp = sphere([p[0], p[1]]);
     let vp1 = Point2::new(sp[0] / sp[2] * SCALE, sp[1] / sp[2] * SCALE);
     if !(sp[2] > 1e-9 && vp1.is_finite()) {
@@ -966,17 +865,6 @@ fn weight_above_horizon(centres: &[Point2], weights: &[f64], horizon: Line, pp: 
         .filter(|(c, _)| side(**c) != below)
         .map(|(_, w)| w)
         .sum()
-}
-
-pub(super) fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
-    v.sort_by(f64::total_cmp);
-    crate::metrics::percentile_sorted(&v, q)
-}
-
-pub(super) fn sd(v: &[f64]) -> f64 {
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt()
 }
 
 /// Fewer VP1 lines than this within the threshold of VP1 is "not enough evidence".

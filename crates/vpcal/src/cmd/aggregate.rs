@@ -1,301 +1,139 @@
-//! `vpcal aggregate`: per-vehicle VP pairs (a VPout JSON file) to a BrnoCompSpeed system file.
+//! `vpcal aggregate`: per-vehicle VP pairs (a VPout JSON file) to a calibration.
 
-use super::args;
-use anyhow::{Context, Result};
 use std::path::PathBuf;
-use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
-use vpcal_formats::reference::{read_vpout, VpOutItem};
-use vpcal_geom::aggregate::edgelets::Edgelet;
-use vpcal_geom::aggregate::reference::{self, ReferenceOptions};
-use vpcal_geom::aggregate::robust::{self, RobustOptions};
-use vpcal_geom::aggregate::tracks::TrackLine;
-use vpcal_geom::aggregate::{AggregateError, VehicleVps};
-use vpcal_geom::Point2;
 
-/// Aggregation method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Method {
-    /// Robust line intersection and focal fit (DESIGN.md §7 improved; the default). VP1 comes
-    /// from the vehicles' tracks when enough boxes of successive frames link into straight
-    /// tracks, else from the network's per-vehicle VP1 rays.
-    Robust,
-    /// The robust method with VP1 always from the network's per-vehicle VP1 rays.
-    RobustNetwork,
-    /// The paper's medians, exactly as the reference code computed them.
-    Reference,
-}
+use anyhow::{Context, Result};
+use vpcal::aggregate::{aggregate, edgelets_of, Method};
+use vpcal::output::{check_destination, write_bcs_system};
+use vpcal::pipeline::PrincipalPoint;
+use vpcal_formats::calib::{CalibrationFile, InputSummary};
+use vpcal_formats::reference::{infer_image_size, read_vpout};
+use vpcal_geom::aggregate::VehicleVps;
+use vpcal_geom::camera::Calibration;
 
-impl Method {
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Robust => "robust",
-            Method::RobustNetwork => "robust-network",
-            Method::Reference => "reference",
-        }
-    }
-}
-
-/// The outcome of one aggregation: the two VPs and what to tell the user.
-#[derive(Debug, Clone)]
-pub struct Aggregated {
-    pub vp1: Point2,
-    pub vp2: Point2,
-    pub focal_px: f64,
-    pub summary: String,
-    /// What the method used (counts), as JSON for calibration files.
-    pub evidence: serde_json::Value,
-    /// Bootstrap spread of the robust method (null without bootstrap or for `reference`).
-    pub confidence: serde_json::Value,
-    /// The straight vehicle tracks the robust method found (empty for the other methods).
-    pub track_lines: Vec<TrackLine>,
-}
-
-/// The items' edgelets, one list per item; empty when no item has any (files of other tools).
-pub fn edgelets_of(items: &[VpOutItem]) -> Vec<Vec<Edgelet>> {
-    if items.iter().all(|i| i.edgelets.is_empty()) {
-        return Vec::new();
-    }
-    items.iter().map(VpOutItem::edgelets).collect()
-}
-
-/// An optional angle for a summary line.
-fn deg(a: Option<f64>) -> String {
-    a.map_or("-".to_string(), |a| format!("{a:.2}°"))
-}
-
-/// "; the road curves (N tracks bend alike)" when the curved-road test set the tracks aside.
-fn curved_note(e: &robust::Evidence) -> String {
-    if e.curved_fit {
-        format!(
-            " (not used for VP1: the road curves, {} tracks bend alike; horizon and focal length \
-             from the track tangents and edgelets of {} vehicles)",
-            e.curved_tracks, e.curved_vehicles
-        )
-    } else if e.road_curved {
-        format!(
-            " (not used for VP1: the road curves, {} tracks bend alike)",
-            e.curved_tracks
-        )
-    } else {
-        String::new()
-    }
-}
-
-/// Aggregate with `method`; `image_size` is used by the robust method's priors.
-///
-/// # Errors
-/// "Not enough evidence" from the method.
-pub fn aggregate(
-    vehicles: &[VehicleVps],
-    edgelets: &[Vec<Edgelet>],
-    pp: Point2,
-    image_size: (u32, u32),
-    method: Method,
-    min_score: f64,
-    bootstrap: usize,
-) -> Result<Aggregated, AggregateError> {
-    match method {
-        Method::Reference => {
-            let r = reference::aggregate(vehicles, pp, &ReferenceOptions { min_score })?;
-            Ok(Aggregated {
-                vp1: r.vp1,
-                vp2: r.vp2,
-                focal_px: r.focal_px,
-                summary: format!(
-                    "reference: {} vehicles, {} above score {min_score}, {} with a real focal length",
-                    r.pairs_in, r.pairs_scored, r.pairs_used
-                ),
-                evidence: serde_json::json!({
-                    "method": "reference",
-                    "pairs_in": r.pairs_in,
-                    "pairs_scored": r.pairs_scored,
-                    "pairs_used": r.pairs_used,
-                }),
-                confidence: serde_json::Value::Null,
-                track_lines: Vec::new(),
-            })
-        }
-        Method::Robust | Method::RobustNetwork => {
-            let defaults = RobustOptions::default();
-            let options = RobustOptions {
-                min_score,
-                image_size: Some([f64::from(image_size.0), f64::from(image_size.1)]),
-                bootstrap,
-                tracks: defaults.tracks.clone().filter(|_| method == Method::Robust),
-                ..defaults
-            };
-            let r = robust::aggregate_with_edgelets(vehicles, edgelets, pp, &options)?;
-            let e = &r.evidence;
-            let mut summary = format!(
-                "robust: {} vehicles, {} used (effective weight {:.0}, {} repeated boxes down-weighted), \
-                 {} VP1 inliers ({}), {} VP2 inliers, roll {:.2}°, {}",
-                e.pairs_in,
-                e.pairs_used,
-                e.effective_vehicles,
-                e.repeated_boxes,
-                e.vp1_inliers,
-                if e.vp1_from_tracks {
-                    format!(
-                        "VP1 from {} vehicle tracks, median angle {}; the network's rays {}",
-                        e.track_lines,
-                        deg(e.track_residual_deg),
-                        deg(e.vp1_ray_scatter_deg)
-                    )
-                } else if e.vp1_from_edgelets {
-                    format!(
-                        "VP1 from {} edgelets along the vehicles; the network's rays {}, {} straight vehicle tracks{}",
-                        e.vp1_edgelets,
-                        deg(e.vp1_ray_scatter_deg),
-                        e.track_lines,
-                        curved_note(e)
-                    )
-                } else {
-                    format!(
-                        "VP1 from the network's rays, median angle {}; {} straight vehicle tracks, {}{}",
-                        deg(e.vp1_ray_scatter_deg),
-                        e.track_lines,
-                        deg(e.track_residual_deg),
-                        curved_note(e)
-                    )
-                },
-                e.vp2_inliers,
-                r.roll.to_degrees(),
-                {
-                    let rays = if e.rays_trusted {
-                        "VP2 points agree with the rays (data trusted)"
-                    } else {
-                        "VP2 points disagree with the rays (focal prior in use)"
-                    };
-                    let edges = format!("{} edgelets on {} vehicles", e.edgelets, e.edgelet_vehicles);
-                    if e.focal_from_edgelets {
-                        format!("roll and focal length from {edges}")
-                    } else if e.roll_from_edgelets {
-                        format!("roll from {edges} (VP2 too far for the focal length); {rays}")
-                    } else if e.edgelets > 0 {
-                        format!("{rays}; {edges} not used (roll ±{})", deg(e.edgelet_roll_sd_deg))
-                    } else {
-                        rays.to_string()
-                    }
-                }
-            );
-            if let Some(c) = &r.confidence {
-                summary.push_str(&format!(
-                    "; focal 68% interval {:.0}-{:.0} px (VP2 rays alone: {:.0} px), horizon ±{:.2}°",
-                    c.focal_px_p16, c.focal_px_p84, c.focal_px_data_only, c.horizon_angle_sd_deg
-                ));
-            }
-            let evidence = serde_json::json!({
-                "method": method.name(),
-                "pairs_in": e.pairs_in,
-                "pairs_used": e.pairs_used,
-                "effective_vehicles": e.effective_vehicles,
-                "repeated_boxes": e.repeated_boxes,
-                "vp1_inliers": e.vp1_inliers,
-                "vp2_inliers": e.vp2_inliers,
-                "rays_trusted": e.rays_trusted,
-                "track_lines": e.track_lines,
-                "vp1_from_tracks": e.vp1_from_tracks,
-                "vp1_ray_scatter_deg": e.vp1_ray_scatter_deg,
-                "track_residual_deg": e.track_residual_deg,
-                "curved_tracks": e.curved_tracks,
-                "road_curved": e.road_curved,
-                "curved_fit": e.curved_fit,
-                "curved_vehicles": e.curved_vehicles,
-                "vp1_from_edgelets": e.vp1_from_edgelets,
-                "vp1_edgelets": e.vp1_edgelets,
-                "edgelets": e.edgelets,
-                "edgelet_vehicles": e.edgelet_vehicles,
-                "roll_from_edgelets": e.roll_from_edgelets,
-                "focal_from_edgelets": e.focal_from_edgelets,
-                "edgelet_focal_px": e.edgelet_focal_px,
-                "edgelet_roll_sd_deg": e.edgelet_roll_sd_deg,
-                "edgelet_focal_log_spread": e.edgelet_focal_log_spread,
-                "edgelet_vp2_widths": e.edgelet_vp2_widths,
-                "roll_deg": r.roll.to_degrees(),
-                "ray_bias_deg": r.ray_bias.to_degrees(),
-            });
-            let confidence = match &r.confidence {
-                Some(c) => serde_json::json!({
-                    "focal_px_p16": c.focal_px_p16,
-                    "focal_px_p84": c.focal_px_p84,
-                    "focal_px_vp2_rays_only": c.focal_px_data_only,
-                    "horizon_angle_sd_deg": c.horizon_angle_sd_deg,
-                    "vp1_sd_px": c.vp1_sd_px,
-                    "resamples": c.resamples,
-                }),
-                None => serde_json::Value::Null,
-            };
-            Ok(Aggregated {
-                vp1: r.calibration.vp1,
-                vp2: r.calibration.vp2,
-                focal_px: r.calibration.focal_px,
-                summary,
-                evidence,
-                confidence,
-                track_lines: r.track_lines,
-            })
-        }
-    }
-}
+use super::{Exit, UsageError};
 
 /// Turn per-vehicle VP pairs (a VPout JSON file) into a camera calibration.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Per-vehicle VP outputs (the reference's VPout_*.json format).
+    /// Per-vehicle VP records: the reference's VPout_*.json, or `vpcal calibrate --vehicles`.
     pub vpout: PathBuf,
-    /// Aggregation method.
-    #[arg(long, value_enum, default_value_t = Method::Robust)]
+    /// Write the calibration file here (the same file `vpcal calibrate -o` writes).
+    #[arg(short, long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Also write the camera as a BrnoCompSpeed system file.
+    #[arg(long, value_name = "FILE")]
+    pub bcs_json: Option<PathBuf>,
+    /// Print the calibration file on stdout (the summary stays on stderr).
+    #[arg(long)]
+    pub json: bool,
+    /// Aggregation method: `robust` (the default), `robust-network` or `reference`.
+    #[arg(long, default_value = "robust", value_parser = super::args::method())]
     pub method: Method,
-    /// Principal point x,y in frame pixels. Default: the BrnoCompSpeed convention for
-    /// --image-size, (W/2 + 0.5, H/2 + 0.5).
-    #[arg(long, value_parser = args::point)]
-    pub pp: Option<Point2>,
-    /// Image size WxH, used for the default principal point and the robust method's priors.
-    #[arg(long, value_parser = args::size, default_value = "1920x1080")]
-    pub image_size: (u32, u32),
+    /// Principal point: `centre` (W/2, H/2), `bcs` (W/2 + 0.5, H/2 + 0.5: the convention of
+    /// the reference's VPout files of BrnoCompSpeed) or x,y in pixels.
+    #[arg(long, default_value = "centre", value_name = "PP")]
+    pub pp: PrincipalPoint,
+    /// Size WxH of the frames the VPs were measured in. Default: inferred from the records'
+    /// boxes (an error names this flag when they do not fix it).
+    #[arg(long, value_parser = super::args::size)]
+    pub image_size: Option<(u32, u32)>,
     /// Keep vehicles whose detector score is above this.
     #[arg(long, default_value_t = 0.1)]
     pub min_score: f64,
     /// Bootstrap resamples for the robust method's confidence (0 to skip).
     #[arg(long, default_value_t = 30)]
     pub bootstrap: usize,
-    /// Output BrnoCompSpeed system file (system_<name>.json).
-    #[arg(short, long)]
-    pub output: PathBuf,
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args) -> Result<Exit> {
+    if args.output.is_none() && args.bcs_json.is_none() && !args.json {
+        return Err(UsageError(
+            "nothing would keep the calibration: give -o FILE (the calibration file), \
+             --bcs-json FILE or --json"
+                .to_string(),
+        )
+        .into());
+    }
+    for (flag, path) in [("--output", &args.output), ("--bcs-json", &args.bcs_json)] {
+        if let Some(path) = path {
+            check_destination(flag, path)?;
+        }
+    }
     let items = read_vpout(&args.vpout)?;
-    let pp = args
-        .pp
-        .unwrap_or_else(|| args::bcs_principal_point(args.image_size.0, args.image_size.1));
+    let (width, height) = match args.image_size {
+        Some(size) => size,
+        None => infer_image_size(&items).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: the frame size is not known: {e}; give it with --image-size WxH",
+                args.vpout.display()
+            )
+        })?,
+    };
+    let pp = args.pp.resolve(width, height);
     let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
+    let input = InputSummary {
+        path: args.vpout.display().to_string(),
+        kind: Some("vehicle_records".to_string()),
+        width,
+        height,
+        vehicle_boxes: items.len() as u64,
+        ..InputSummary::default()
+    };
+    let settings = serde_json::json!({
+        "method": args.method.name(),
+        "min_score": args.min_score,
+        "bootstrap": args.bootstrap,
+        "pp": args.pp.to_json(),
+        "image_size": [width, height],
+    });
     let result = aggregate(
         &vehicles,
         &edgelets_of(&items),
         pp,
-        args.image_size,
+        (width, height),
         args.method,
         args.min_score,
         args.bootstrap,
     )
-    .with_context(|| format!("aggregating {}", args.vpout.display()))?;
-    let system = SystemFile::new(SystemCalibration {
-        vp1: result.vp1,
-        vp2: result.vp2,
-        pp,
-        scale: 1.0,
+    .with_context(|| format!("aggregating {}", args.vpout.display()))
+    .and_then(|agg| {
+        let cal = Calibration::from_vps(agg.vp1, agg.vp2, pp)
+            .map_err(|e| anyhow::anyhow!("the aggregated vanishing points give no camera: {e}"))?;
+        Ok((cal, agg))
     });
-    write_system(&args.output, &system)?;
-    eprintln!("{}", result.summary);
-    eprintln!(
-        "f = {:.1} px, vp1 = ({:.2}, {:.2}), vp2 = ({:.2}, {:.2}) -> {}",
-        result.focal_px,
-        result.vp1.x,
-        result.vp1.y,
-        result.vp2.x,
-        result.vp2.y,
-        args.output.display()
-    );
-    Ok(())
+    let (mut file, exit) = match &result {
+        Ok((cal, agg)) => {
+            let mut file = CalibrationFile::calibrated(input, cal);
+            file.evidence = Some(agg.evidence.clone());
+            file.confidence = agg.confidence.clone();
+            file.summary = Some(agg.summary.clone());
+            eprintln!("{}", agg.summary);
+            eprintln!(
+                "f = {:.1} px, vp1 = ({:.2}, {:.2}), vp2 = ({:.2}, {:.2}), {width}x{height} frames",
+                cal.focal_px, cal.vp1.x, cal.vp1.y, cal.vp2.x, cal.vp2.y
+            );
+            (file, Exit::Success)
+        }
+        Err(e) => {
+            eprintln!("vpcal: no calibration: {e:#}");
+            (
+                CalibrationFile::not_calibrated(input, format!("{e:#}")),
+                Exit::NotEnoughEvidence,
+            )
+        }
+    };
+    if let serde_json::Value::Object(m) = settings {
+        file.settings = m;
+    }
+    if let Some(path) = &args.output {
+        file.write(path)?;
+    }
+    if let (Some(path), Ok((cal, _))) = (&args.bcs_json, &result) {
+        write_bcs_system(path, cal, None)?;
+    }
+    if args.json {
+        print!("{}", file.to_json_string());
+    }
+    Ok(exit)
 }

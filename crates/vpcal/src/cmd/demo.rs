@@ -8,20 +8,27 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use serde_json::json;
+use vpcal::output;
+use vpcal::overlay;
 use vpcal_formats::bcs::{read_gt, read_system};
+use vpcal_formats::calib::{DemoComparison, RatioErrors};
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::{ratio_errors, summarize};
 use vpcal_synth::scene::{render_scene, SceneSpec, WriteOptions};
 use vpcal_synth::world::LayoutKind;
 
-use super::calibrate::{self, write_json_doc, PipelineArgs};
-use super::overlay;
+use super::calibrate::{self, PipelineArgs};
+use super::Exit;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Output folder: the scene (dataset/, results/), calib.json, overlay.png, vehicles.json.
-    #[arg(long, default_value = "vpcal-demo")]
+    /// Output folder: the scene (dataset/, results/), calib.json and overlay.png.
+    #[arg(
+        short = 'o',
+        long = "output",
+        alias = "out",
+        default_value = "vpcal-demo"
+    )]
     pub out: PathBuf,
     /// Seed of the scene (camera, traffic, appearance).
     #[arg(long, default_value_t = 3)]
@@ -46,7 +53,7 @@ fn parse_layout(s: &str) -> Result<LayoutKind, String> {
     s.parse()
 }
 
-pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
+pub fn run(mut a: Args) -> Result<Exit> {
     let name = format!("demo_{}_s{}", a.layout.name(), a.seed);
     let mut spec = SceneSpec::new(&name, a.layout, a.seed);
     spec.frames = a.frames;
@@ -85,8 +92,10 @@ pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
         a.pipeline.detect.detections = Some(dataset.join("detections.csv"));
     }
     // The synthetic camera's principal point is the image centre, the pipeline's default.
-    let out = calibrate::run_pipeline(&video, &a.pipeline)?;
-    let result = calibrate::calibrate(&out, &a.pipeline);
+    let config = a.pipeline.config()?;
+    let bar = super::FrameBar::new("frames", a.pipeline.quiet);
+    let out = vpcal::run_pipeline(&video, &config, &bar)?;
+    let result = vpcal::calibrate(&out, &config);
     calibrate::print_summary(&out, &result);
 
     let truth_sys = read_system(&results.join("system_groundtruth.json"))?;
@@ -100,9 +109,7 @@ pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
         Ok(r) => r,
         Err(e) => {
             eprintln!("vpcal demo: no calibration: {e:#}");
-            return Ok(std::process::ExitCode::from(
-                calibrate::EXIT_NOT_ENOUGH_EVIDENCE,
-            ));
+            return Ok(Exit::NotEnoughEvidence);
         }
     };
     let ratio = ratio_errors(&cal, &measurements)
@@ -118,28 +125,26 @@ pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
     let hy = |c: &Calibration| c.horizon.y_at(cx).unwrap_or(f64::NAN);
     let focal_err = (cal.focal_px / truth.focal_px - 1.0) * 100.0;
 
-    let mut doc = calibrate::calibration_json(&out, &a.pipeline, &cal, &agg);
-    if let Some(obj) = doc.as_object_mut() {
-        obj.insert(
-            "demo".into(),
-            json!({
-                "scene": name,
-                "true_focal_px": truth.focal_px,
-                "focal_error_pct": focal_err,
-                "true_vp1": [truth.vp1.x, truth.vp1.y],
-                "true_vp2": [truth.vp2.x, truth.vp2.y],
-                "horizon_angle_error_deg": horizon_diff,
-                "horizon_y_at_centre": hy(&cal),
-                "true_horizon_y_at_centre": hy(&truth),
-                "bcs_ratio_error_pct": {
-                    "mean": ratio.mean, "median": ratio.median, "p95": ratio.p95,
-                    "max": ratio.max, "pairs": ratio.n,
-                },
-            }),
-        );
-    }
-    write_json_doc(&a.out.join("calib.json"), &doc)?;
-    super::calibrate::write_bcs_system(&results.join("system_vpcal.json"), &cal)?;
+    let mut doc = output::calibration_file(&out, &config, &cal, &agg);
+    doc.demo = Some(DemoComparison {
+        scene: name.clone(),
+        true_focal_px: truth.focal_px,
+        focal_error_pct: focal_err,
+        true_vp1: [truth.vp1.x, truth.vp1.y],
+        true_vp2: [truth.vp2.x, truth.vp2.y],
+        horizon_angle_error_deg: horizon_diff,
+        horizon_y_at_centre: cal.horizon.y_at(cx),
+        true_horizon_y_at_centre: truth.horizon.y_at(cx),
+        bcs_ratio_error_pct: RatioErrors {
+            mean: ratio.mean,
+            median: ratio.median,
+            p95: ratio.p95,
+            max: ratio.max,
+            pairs: ratio.n,
+        },
+    });
+    doc.write(&a.out.join("calib.json"))?;
+    output::write_bcs_system(&results.join("system_vpcal.json"), &cal, None)?;
     let overlay_path = a.out.join("overlay.png");
     if let Some(picture) = &out.picture {
         let img = overlay::draw(picture, &cal, &out.records, &agg.track_lines);
@@ -172,5 +177,5 @@ pub fn run(mut a: Args) -> Result<std::process::ExitCode> {
         overlay_path.display(),
         results.join("system_vpcal.json").display()
     );
-    Ok(std::process::ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }

@@ -11,7 +11,10 @@ use anyhow::{bail, Context, Result};
 use serde_json::json;
 use vpcal_video::detect::file::write_detections;
 
-use super::calibrate::{check_destination, open_detector, DetectorArgs, FrameArgs};
+use vpcal::detector::open_detector;
+use vpcal::output::check_destination;
+
+use super::calibrate::{DetectorArgs, FrameArgs};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -44,7 +47,7 @@ pub fn run(a: Args) -> Result<()> {
     let options = a.frames.options();
     let mut source = a.frames.open(&a.input)?;
     let info = source.info().clone();
-    let mut detector = open_detector(&a.detect, &info)?;
+    let mut detector = open_detector(&a.detect.settings()?, &info)?;
     let pb = super::progress_bar(info.expected_frames(&options), "frames", a.quiet);
     let t0 = Instant::now();
     let mut rows = Vec::new();

@@ -6,12 +6,12 @@
 //! with the optimal per-session scale (BrnoCarPark). Pooled rows concatenate all pairs, as the
 //! paper does.
 
-use super::aggregate::{aggregate, edgelets_of, Method};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use vpcal::aggregate::{aggregate, edgelets_of, Method};
 use vpcal_formats::bcp::read_gt_pairs;
 use vpcal_formats::bcs::{self, read_gt, read_system, write_system, SystemCalibration, SystemFile};
 use vpcal_formats::reference::read_vpout;
@@ -42,8 +42,8 @@ pub struct VpoutArgs {
     /// The BrnoCompSpeed dataset directory (ground truth).
     #[arg(long)]
     pub dataset: PathBuf,
-    /// Aggregation methods to compare.
-    #[arg(long, value_enum, num_args = 1.., default_values = ["reference", "robust"])]
+    /// Aggregation methods to compare (robust, robust-network, reference).
+    #[arg(long, num_args = 1.., default_values = ["reference", "robust"], value_parser = super::args::method())]
     pub methods: Vec<Method>,
     /// Only the sessions of an official split: A (1-6), B (3-6) or C (4-6).
     #[arg(long, value_parser = parse_split)]
@@ -519,7 +519,8 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             args.vp_outputs.display()
         );
     }
-    let pp = super::args::bcs_principal_point(args.image_size.0, args.image_size.1);
+    // The BrnoCompSpeed protocol: its files' principal point convention.
+    let pp = vpcal::pipeline::PrincipalPoint::Bcs.resolve(args.image_size.0, args.image_size.1);
     // Every (video, file, method) job, run in parallel.
     let jobs: Vec<(usize, String, PathBuf, Method)> = work
         .iter()

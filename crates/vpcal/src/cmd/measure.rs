@@ -9,10 +9,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use serde_json::Value;
+use vpcal_formats::calib::{CalibrationFile, ScaleReference};
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::Point2;
-
-use super::calibrate::write_json_doc;
 
 /// Two road points in pixels, `x1,y1,x2,y2`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,6 +45,9 @@ pub struct ScaleArgs {
     /// Write the scaled calibration here (default: update CALIB in place, atomically).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// Print the scale as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -60,57 +62,22 @@ pub struct MeasureArgs {
     pub json: bool,
 }
 
-/// A calibration file: its JSON and the camera it describes.
+/// A calibration file and the camera it describes.
 struct CalibFile {
-    doc: Value,
+    file: CalibrationFile,
     cal: Calibration,
     scale: Option<f64>,
 }
 
 fn read_calib(path: &Path) -> Result<CalibFile> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let doc: Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a JSON calibration", path.display()))?;
-    if let Some(status) = doc.get("status").and_then(Value::as_str) {
-        if status != "calibrated" {
-            bail!(
-                "{}: status is {status:?}, not \"calibrated\": this run produced no camera",
-                path.display()
-            );
-        }
-    }
-    let point = |field: &str| -> Result<Point2> {
-        let v = doc
-            .get(field)
-            .and_then(Value::as_array)
-            .filter(|a| a.len() == 2)
-            .and_then(|a| Some(Point2::new(a[0].as_f64()?, a[1].as_f64()?)))
-            .filter(|p| p.is_finite());
-        v.with_context(|| {
-            format!(
-                "{}: field {field:?} must be [x, y] (finite numbers)",
-                path.display()
-            )
-        })
-    };
-    let (vp1, vp2, pp) = (point("vp1")?, point("vp2")?, point("pp")?);
-    let cal = Calibration::from_vps(vp1, vp2, pp)
-        .map_err(|e| anyhow::anyhow!("{}: vp1, vp2 and pp give no camera: {e}", path.display()))?;
-    let scale = match doc.get("scale_m_per_unit") {
-        None | Some(Value::Null) => None,
-        Some(v) => Some(
-            v.as_f64()
-                .filter(|s| s.is_finite() && *s > 0.0)
-                .with_context(|| {
-                    format!(
-                        "{}: scale_m_per_unit must be a positive number",
-                        path.display()
-                    )
-                })?,
-        ),
-    };
-    Ok(CalibFile { doc, cal, scale })
+    let file = CalibrationFile::read(path)?;
+    let cal = file
+        .camera()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let scale = file
+        .scale()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(CalibFile { file, cal, scale })
 }
 
 pub fn run_scale(a: ScaleArgs) -> Result<()> {
@@ -137,21 +104,33 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
         .with_context(|| {
             "--points: the two pixels coincide on the road (or a ray misses the road plane)"
         })?;
-    let obj = f
-        .doc
-        .as_object_mut()
-        .with_context(|| format!("{}: not a JSON object", a.calib.display()))?;
-    obj.insert("scale_m_per_unit".into(), scale.into());
-    obj.insert(
-        "scale_reference".into(),
-        serde_json::json!({
-            "points": [[p1.x, p1.y], [p2.x, p2.y]],
-            "distance_m": a.distance,
-        }),
-    );
+    f.file
+        .set_scale(
+            scale,
+            Some(ScaleReference {
+                points: [[p1.x, p1.y], [p2.x, p2.y]],
+                distance_m: a.distance,
+            }),
+        )
+        .map_err(|e| anyhow::anyhow!("{}: {e}", a.calib.display()))?;
     let out = a.output.as_deref().unwrap_or(&a.calib);
-    write_json_doc(out, &f.doc)?;
-    println!("scale {scale:.6} m per road unit -> {}", out.display());
+    f.file.write(out)?;
+    let height = f.file.camera_height_m.unwrap_or(f64::NAN);
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "scale_m_per_unit": scale,
+                "camera_height_m": height,
+                "output": out.display().to_string(),
+            }))?
+        );
+    } else {
+        println!(
+            "scale {scale:.6} m per road unit (camera {height:.2} m above the road) -> {}",
+            out.display()
+        );
+    }
     Ok(())
 }
 

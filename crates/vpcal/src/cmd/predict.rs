@@ -9,7 +9,6 @@ use image::{Rgb, RgbImage};
 use vpcal_geom::heatmap::DecodeMode;
 use vpcal_geom::{BoxPx, Point2};
 use vpcal_net::report::heatmap_grid;
-use vpcal_net::VpNet;
 
 /// How the spreads `D^s` decode the near-maximum pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -26,9 +25,9 @@ pub struct Args {
     #[arg(required = true, value_name = "CROP")]
     pub crops: Vec<PathBuf>,
     /// Trained weights: a `.safetensors` file, a checkpoint folder, or a `vpcal train` run
-    /// folder (its latest checkpoint).
-    #[arg(long, value_name = "PATH")]
-    pub weights: PathBuf,
+    /// folder (its latest checkpoint). Default: the bundled model.
+    #[arg(long = "model", alias = "weights", value_name = "PATH")]
+    pub weights: Option<PathBuf>,
     /// Where the (single) crop was cut from in its frame, `x0,y0,x1,y1` pixels: the VPs are
     /// also printed in frame pixels.
     #[arg(long = "box", value_name = "X0,Y0,X1,Y1", value_parser = parse_box)]
@@ -38,7 +37,7 @@ pub struct Args {
     #[arg(long, value_name = "IMG", requires = "bbox")]
     pub frame: Option<PathBuf>,
     /// Folder for the heatmap grids (`<crop>.heatmaps.png`); default: next to each crop.
-    #[arg(long, value_name = "DIR")]
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Print one JSON object per crop instead of text.
     #[arg(long)]
@@ -150,13 +149,11 @@ pub fn run(a: Args) -> Result<()> {
             a.crops.len()
         );
     }
-    let device = vpcal_net::device::select(&a.device)?;
-    let net = VpNet::load(&a.weights, &device)
-        .with_context(|| format!("loading weights from {}", a.weights.display()))?
-        .with_decode_mode(match a.decode {
-            Decode::Centre => DecodeMode::Centre,
-            Decode::Reference => DecodeMode::Reference,
-        });
+    let (net, _) = vpcal::model::load_model(a.weights.as_deref(), &a.device)?;
+    let net = net.with_decode_mode(match a.decode {
+        Decode::Centre => DecodeMode::Centre,
+        Decode::Reference => DecodeMode::Reference,
+    });
     let mut crops = Vec::with_capacity(a.crops.len());
     for path in &a.crops {
         let img = image::open(path)

@@ -50,7 +50,7 @@ pub struct CropsArgs {
     #[arg(long)]
     pub count: u64,
     /// Output directory (created).
-    #[arg(long)]
+    #[arg(short = 'o', long = "output", alias = "out")]
     pub out: PathBuf,
     /// Random seed: the same seed gives the same crops.
     #[arg(long, default_value_t = 0)]
@@ -71,7 +71,7 @@ pub struct SceneArgs {
     #[arg(long, default_value_t = 100)]
     pub frames: u32,
     /// Output root (gets dataset/<name>/ and results/<name>/).
-    #[arg(long)]
+    #[arg(short = 'o', long = "output", alias = "out")]
     pub out: PathBuf,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -119,16 +119,18 @@ pub struct OutputArgs {
 #[derive(Debug, clap::Args)]
 pub struct SuiteArgs {
     /// Output root (gets dataset/<scene>/ and results/<scene>/ for every scene).
-    #[arg(long)]
+    #[arg(short = 'o', long = "output", alias = "out")]
     pub out: PathBuf,
     /// Frames per scene.
+    /// Frames per scene (25 frames/s).
     #[arg(long, default_value_t = 150)]
     pub frames: u32,
+    /// Seed of the suite's scenes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Samples per pixel along each axis for every scene: 3 integrates over the pixel area as a
     /// camera sensor does (and as the training crops' 2); 1 is point sampling, whose pixel
-    /// staircases pull nearly horizontal edges towards 0° (the suite before 2026-11-22).
+    /// staircases pull nearly horizontal edges towards 0°.
     #[arg(long, default_value_t = 3)]
     pub supersample: u32,
     #[command(flatten)]
@@ -138,7 +140,7 @@ pub struct SuiteArgs {
 #[derive(Debug, clap::Args)]
 pub struct SheetArgs {
     /// Output PNG.
-    #[arg(long)]
+    #[arg(short = 'o', long = "output", alias = "out")]
     pub out: PathBuf,
     /// Read the crops from a `vpcal synth crops` directory instead of generating them.
     #[arg(long)]

@@ -42,12 +42,14 @@ pub struct Args {
     #[arg(long, value_name = "KIND:ARG")]
     pub data: Option<String>,
     /// Run folder: checkpoints, metrics.csv/jsonl, curves.png.
-    #[arg(long, value_name = "DIR")]
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     pub out: PathBuf,
     /// Continue the run in --out from its latest checkpoint.
     #[arg(long)]
     pub resume: bool,
-    /// Model size: `paper` (DESIGN.md §5) or `tiny` (CPU training and tests).
+    /// Model size: `paper` (the paper's stacked hourglass: 2 stacks, 128 px crops, 64 px
+    /// heatmaps, 4 scales; a GPU is advised), `small` (the bundled model's size) or `tiny`
+    /// (CPU training and tests).
     #[arg(long, default_value = "paper")]
     pub preset: String,
     /// Network architecture.

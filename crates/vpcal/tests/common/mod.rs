@@ -44,3 +44,8 @@ pub fn real_data(sub: &str) -> Option<PathBuf> {
 pub fn read_json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
 }
+
+/// A calibration file, read with the library's reader (which checks its format).
+pub fn read_calibration(p: &Path) -> vpcal_formats::calib::CalibrationFile {
+    vpcal_formats::calib::CalibrationFile::read(p).unwrap()
+}

@@ -12,7 +12,7 @@ use vpcal_geom::camera::Calibration;
 use vpcal_geom::Point2;
 use vpcal_synth::sheet::draw_line;
 
-use super::calibrate::VehicleRecord;
+use crate::pipeline::VehicleRecord;
 
 const YELLOW: Rgb<u8> = Rgb([255, 220, 0]);
 const CYAN: Rgb<u8> = Rgb([0, 220, 255]);
@@ -76,13 +76,9 @@ pub fn draw_records_only(picture: &RgbImage, records: &[VehicleRecord]) -> RgbIm
     img
 }
 
-/// Percentile (0..1) of unsorted values.
-fn percentile(v: &mut [f64], q: f64) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    Some(v[((v.len() - 1) as f64 * q).round() as usize])
+/// Percentile (0..1) of values; `None` when there are none.
+fn percentile(v: &[f64], q: f64) -> Option<f64> {
+    Some(vpcal_geom::solve::percentile(v.to_vec(), q * 100.0)).filter(|p| p.is_finite())
 }
 
 /// The road grid: lines along the traffic direction (VP1) and across it (VP2) over the area
@@ -107,10 +103,10 @@ fn draw_grid(img: &mut RgbImage, cal: &Calibration, records: &[VehicleRecord]) {
     }
     // Without vehicles on the road: a grid around the road point below the image centre.
     let (a0, a1, b0, b1, base) = match (
-        percentile(&mut along, 0.05),
-        percentile(&mut along, 0.95),
-        percentile(&mut across, 0.05),
-        percentile(&mut across, 0.95),
+        percentile(&along, 0.05),
+        percentile(&along, 0.95),
+        percentile(&across, 0.05),
+        percentile(&across, 0.95),
         origin,
     ) {
         (Some(a0), Some(a1), Some(b0), Some(b1), Some(o)) if a1 > a0 && b1 > b0 => {

@@ -1,0 +1,515 @@
+//! vpcal's calibration file (`calib.json`): one typed, versioned document that every command
+//! writes and reads (`calibrate`, `aggregate`, `demo`, `scale`, `measure`).
+//!
+//! Field by field reference: `docs/calibration-file.md`. The document is strict JSON: a
+//! non-finite number (a vanishing point at infinity) is written as `null`. Readers accept
+//! every version in [`SUPPORTED_VERSIONS`]; writers write [`FORMAT`].
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use vpcal_geom::camera::Calibration;
+use vpcal_geom::rotation::{rotation_vector, Mat3};
+use vpcal_geom::Point2;
+
+use crate::error::FormatError;
+use crate::fs::write_atomic;
+
+/// The format tag vpcal writes.
+pub const FORMAT: &str = "vpcal-calibration/2";
+/// The versions of the format readers accept (1 lacks the OpenCV block and the camera height).
+pub const SUPPORTED_VERSIONS: [u32; 2] = [1, 2];
+
+/// Whether the run produced a camera.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// The camera fields are present.
+    Calibrated,
+    /// The footage did not support a calibration; `reason` says why.
+    NotEnoughEvidence,
+}
+
+/// Boxes the per-frame filter dropped, by reason.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Dropped {
+    pub low_score: u64,
+    pub r#static: u64,
+    pub over_limit: u64,
+    pub outside_frame: u64,
+    pub seen_before: u64,
+}
+
+/// What was read: the footage (or a file of per-vehicle records) and what came of it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct InputSummary {
+    /// The input path as given.
+    pub path: String,
+    /// `video`, `image_folder`, `image` or `vehicle_records` (a VPout file).
+    pub kind: Option<String>,
+    pub width: u32,
+    pub height: u32,
+    /// Frames per second (videos, and image folders given `--fps`).
+    pub fps: Option<f64>,
+    pub codec: Option<String>,
+    pub frames_processed: u64,
+    pub frames_replayed: u64,
+    pub detections: u64,
+    pub dropped: Dropped,
+    /// Vehicle boxes that reached the network (for a VPout file: its records).
+    pub vehicle_boxes: u64,
+    pub seconds: f64,
+}
+
+/// The horizon: a homogeneous line `a x + b y + c = 0` with `a² + b² = 1`, and its angle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Horizon {
+    pub line: [f64; 3],
+    pub angle_deg: f64,
+}
+
+/// The known distance a metric scale came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ScaleReference {
+    /// The two road pixels `[[x1, y1], [x2, y2]]`.
+    pub points: [[f64; 2]; 2],
+    pub distance_m: f64,
+}
+
+/// Bootstrap spread of the robust aggregation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Confidence {
+    pub focal_px_p16: f64,
+    pub focal_px_p84: f64,
+    pub focal_px_vp2_rays_only: f64,
+    pub horizon_angle_sd_deg: f64,
+    pub vp1_sd_px: f64,
+    pub resamples: usize,
+}
+
+/// The camera as OpenCV takes it: `cv2.projectPoints(road_points, rvec, tvec, camera_matrix,
+/// dist_coeffs)` maps road-frame points (z = 0 on the road) to pixels.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OpenCvCamera {
+    pub camera_matrix: Mat3,
+    /// `k1, k2, p1, p2, k3`: all zero, the method assumes no lens distortion.
+    pub dist_coeffs: [f64; 5],
+    /// Road frame to camera rotation (Rodrigues vector, radians).
+    pub rvec: [f64; 3],
+    /// The road origin in camera coordinates, in `units`.
+    pub tvec: [f64; 3],
+    /// `m` once the calibration has a metric scale, else `road_units` (the BCS plane units).
+    pub units: String,
+    /// `[width, height]`.
+    pub image_size: [u32; 2],
+}
+
+/// The demo's comparison with the synthetic scene's true camera.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DemoComparison {
+    pub scene: String,
+    pub true_focal_px: f64,
+    pub focal_error_pct: f64,
+    pub true_vp1: [f64; 2],
+    pub true_vp2: [f64; 2],
+    pub horizon_angle_error_deg: f64,
+    pub horizon_y_at_centre: Option<f64>,
+    pub true_horizon_y_at_centre: Option<f64>,
+    pub bcs_ratio_error_pct: RatioErrors,
+}
+
+/// BrnoCompSpeed ratio errors of road distances, percent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RatioErrors {
+    pub mean: f64,
+    pub median: f64,
+    pub p95: f64,
+    pub max: f64,
+    pub pairs: usize,
+}
+
+/// A calibration file. With `status: calibrated` the camera fields (`pp` to `roll_deg`) are
+/// all present; otherwise they are absent and `reason` says why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CalibrationFile {
+    /// `vpcal-calibration/<version>`.
+    pub format: String,
+    pub status: Status,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// The vpcal that wrote the file.
+    #[serde(default)]
+    pub vpcal_version: String,
+    #[serde(default)]
+    pub input: InputSummary,
+    /// `[width, height]` in pixels.
+    pub image_size: [u32; 2],
+    /// Principal point, pixels (the image centre `(W/2, H/2)` unless given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pp: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focal_px: Option<f64>,
+    /// Intrinsic matrix `[[f, 0, px], [0, f, py], [0, 0, 1]]`.
+    #[serde(rename = "K", default, skip_serializing_if = "Option::is_none")]
+    pub k: Option<Mat3>,
+    /// Road to camera rotation of the BCS convention: columns are vp1's direction, vp2's
+    /// (signed for a right-handed frame) and the road normal towards vp3 (into the road for a
+    /// camera above it). For a z-up road frame see `opencv`.
+    #[serde(rename = "R", default, skip_serializing_if = "Option::is_none")]
+    pub r: Option<Mat3>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vp1: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vp2: Option<[f64; 2]>,
+    /// The vertical vanishing point; `null` when it is at infinity.
+    #[serde(default)]
+    pub vp3: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub horizon: Option<Horizon>,
+    /// Unit road normal in camera coordinates (x right, y down, z forward), towards vp3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub road_normal: Option<[f64; 3]>,
+    /// Angle of the optical axis below the road plane, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tilt_deg: Option<f64>,
+    /// Angle of the horizon against the image x axis, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roll_deg: Option<f64>,
+    /// Metres per BCS road-plane unit; `null` until a scale is known.
+    #[serde(default)]
+    pub scale_m_per_unit: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_reference: Option<ScaleReference>,
+    /// Height of the camera above the road, metres (with a scale).
+    #[serde(default)]
+    pub camera_height_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub opencv: Option<OpenCvCamera>,
+    /// What the aggregation used (counts and flags of the method; diagnostic, its members
+    /// depend on the method).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub evidence: Option<serde_json::Value>,
+    #[serde(default)]
+    pub confidence: Option<Confidence>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub summary: Option<String>,
+    /// The settings of the run, by flag name.
+    #[serde(default)]
+    pub settings: serde_json::Map<String, serde_json::Value>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub demo: Option<DemoComparison>,
+}
+
+fn point(p: Point2) -> Option<[f64; 2]> {
+    p.is_finite().then_some([p.x, p.y])
+}
+
+impl CalibrationFile {
+    /// A file without a camera: the run could not support one, for `reason`.
+    pub fn not_calibrated(input: InputSummary, reason: String) -> CalibrationFile {
+        CalibrationFile {
+            format: FORMAT.to_string(),
+            status: Status::NotEnoughEvidence,
+            reason: Some(reason),
+            vpcal_version: env!("CARGO_PKG_VERSION").to_string(),
+            image_size: [input.width, input.height],
+            input,
+            pp: None,
+            focal_px: None,
+            k: None,
+            r: None,
+            vp1: None,
+            vp2: None,
+            vp3: None,
+            horizon: None,
+            road_normal: None,
+            tilt_deg: None,
+            roll_deg: None,
+            scale_m_per_unit: None,
+            scale_reference: None,
+            camera_height_m: None,
+            opencv: None,
+            evidence: None,
+            confidence: None,
+            summary: None,
+            settings: serde_json::Map::new(),
+            demo: None,
+        }
+    }
+
+    /// A file of camera `cal` (no metric scale yet).
+    pub fn calibrated(input: InputSummary, cal: &Calibration) -> CalibrationFile {
+        let mut file = CalibrationFile::not_calibrated(input, String::new());
+        file.status = Status::Calibrated;
+        file.reason = None;
+        file.set_camera(cal);
+        file
+    }
+
+    fn set_camera(&mut self, cal: &Calibration) {
+        self.pp = point(cal.pp);
+        self.focal_px = Some(cal.focal_px);
+        self.k = Some(cal.k());
+        self.r = Some(cal.rotation);
+        self.vp1 = point(cal.vp1);
+        self.vp2 = point(cal.vp2);
+        self.vp3 = point(cal.vp3);
+        self.horizon = Some(Horizon {
+            line: cal.horizon.0,
+            angle_deg: cal.horizon.angle().to_degrees(),
+        });
+        self.road_normal = Some(cal.road_normal);
+        self.tilt_deg = Some(cal.tilt().to_degrees());
+        self.roll_deg = Some(cal.roll().to_degrees());
+        self.update_export(cal);
+    }
+
+    /// The OpenCV block and the camera height, for the current scale.
+    fn update_export(&mut self, cal: &Calibration) {
+        let frame = cal.road_frame();
+        let s = self.scale_m_per_unit.unwrap_or(1.0);
+        let t = frame.translation;
+        self.opencv = Some(OpenCvCamera {
+            camera_matrix: cal.k(),
+            dist_coeffs: [0.0; 5],
+            rvec: rotation_vector(&frame.rotation),
+            tvec: [t[0] * s, t[1] * s, t[2] * s],
+            units: if self.scale_m_per_unit.is_some() {
+                "m"
+            } else {
+                "road_units"
+            }
+            .to_string(),
+            image_size: self.image_size,
+        });
+        self.camera_height_m = self.scale_m_per_unit.map(|s| s * cal.plane_distance());
+    }
+
+    /// Give the calibration a metric scale (metres per road unit) and the distance it came
+    /// from; the OpenCV block and the camera height follow.
+    ///
+    /// # Errors
+    /// When the file has no camera.
+    pub fn set_scale(
+        &mut self,
+        scale_m_per_unit: f64,
+        reference: Option<ScaleReference>,
+    ) -> Result<(), String> {
+        let cal = self.camera()?;
+        self.scale_m_per_unit = Some(scale_m_per_unit);
+        self.scale_reference = reference;
+        self.update_export(&cal);
+        Ok(())
+    }
+
+    /// The format version, if the tag is `vpcal-calibration/<N>`.
+    pub fn version(&self) -> Option<u32> {
+        self.format
+            .strip_prefix("vpcal-calibration/")
+            .and_then(|v| v.parse().ok())
+    }
+
+    /// The camera of a calibrated file, from its vp1, vp2 and pp.
+    ///
+    /// # Errors
+    /// A message naming the field when the file has no camera or a field is missing.
+    pub fn camera(&self) -> Result<Calibration, String> {
+        if self.status != Status::Calibrated {
+            return Err(format!(
+                "status is \"not_enough_evidence\", not \"calibrated\": this run produced no \
+                 camera ({})",
+                self.reason.as_deref().unwrap_or("no reason given")
+            ));
+        }
+        let field = |name: &str, v: Option<[f64; 2]>| {
+            v.map(Point2::from)
+                .filter(|p| p.is_finite())
+                .ok_or_else(|| format!("field {name:?} must be [x, y] (finite numbers)"))
+        };
+        let vp1 = field("vp1", self.vp1)?;
+        let vp2 = field("vp2", self.vp2)?;
+        let pp = field("pp", self.pp)?;
+        Calibration::from_vps(vp1, vp2, pp)
+            .map_err(|e| format!("vp1, vp2 and pp give no camera: {e}"))
+    }
+
+    /// The metric scale, checked.
+    ///
+    /// # Errors
+    /// When `scale_m_per_unit` is not a positive number.
+    pub fn scale(&self) -> Result<Option<f64>, String> {
+        match self.scale_m_per_unit {
+            None => Ok(None),
+            Some(s) if s.is_finite() && s > 0.0 => Ok(Some(s)),
+            Some(s) => Err(format!(
+                "scale_m_per_unit must be a positive number, found {s}"
+            )),
+        }
+    }
+
+    /// Strict, pretty-printed JSON (with a final newline).
+    pub fn to_json_string(&self) -> String {
+        // serde_json writes non-finite floats as null: strict JSON.
+        let mut text = serde_json::to_string_pretty(self).unwrap_or_default();
+        text.push('\n');
+        text
+    }
+
+    /// Parse a calibration file's text; `path` names it in errors.
+    ///
+    /// # Errors
+    /// [`FormatError`] for invalid JSON, a missing or mistyped field, an unknown format.
+    pub fn from_json_str(text: &str, path: &Path) -> Result<CalibrationFile, FormatError> {
+        let value: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| FormatError::invalid(path, format!("not a JSON document: {e}")))?;
+        let format = value.get("format").and_then(serde_json::Value::as_str);
+        match format {
+            Some(f) if f.starts_with("vpcal-calibration/") => {}
+            Some(f) => {
+                return Err(FormatError::invalid(
+                    path,
+                    format!(
+                        "field \"format\" is {f:?}: not a vpcal calibration (expected \
+                         \"vpcal-calibration/N\"; a BrnoCompSpeed system file is read by \
+                         `vpcal eval`)"
+                    ),
+                ))
+            }
+            None => {
+                return Err(FormatError::invalid(
+                    path,
+                    "no \"format\" field: not a vpcal calibration file",
+                ))
+            }
+        }
+        let file: CalibrationFile = serde_json::from_value(value)
+            .map_err(|e| FormatError::invalid(path, format!("not a valid calibration: {e}")))?;
+        match file.version() {
+            Some(v) if SUPPORTED_VERSIONS.contains(&v) => Ok(file),
+            _ => Err(FormatError::invalid(
+                path,
+                format!(
+                    "format {:?} is not one this vpcal reads (versions {SUPPORTED_VERSIONS:?})",
+                    file.format
+                ),
+            )),
+        }
+    }
+
+    /// Read a calibration file.
+    ///
+    /// # Errors
+    /// [`FormatError`] naming the file.
+    pub fn read(path: &Path) -> Result<CalibrationFile, FormatError> {
+        let text = std::fs::read_to_string(path).map_err(|e| FormatError::io(path, e))?;
+        CalibrationFile::from_json_str(&text, path)
+    }
+
+    /// Write the file atomically as strict JSON in the current format.
+    ///
+    /// # Errors
+    /// [`FormatError::Io`] naming the file.
+    pub fn write(&self, path: &Path) -> Result<(), FormatError> {
+        let mut out = self.clone();
+        out.format = FORMAT.to_string();
+        write_atomic(path, out.to_json_string().as_bytes())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera() -> Calibration {
+        Calibration::from_vps(
+            Point2::new(700.0, -300.0),
+            Point2::new(-20000.0, -250.0),
+            Point2::new(640.0, 360.0),
+        )
+        .unwrap()
+    }
+
+    fn input() -> InputSummary {
+        InputSummary {
+            path: "clip.mp4".into(),
+            kind: Some("video".into()),
+            width: 1280,
+            height: 720,
+            fps: Some(25.0),
+            ..InputSummary::default()
+        }
+    }
+
+    #[test]
+    fn a_calibrated_file_round_trips_as_strict_json() {
+        let cal = camera();
+        let mut file = CalibrationFile::calibrated(input(), &cal);
+        file.vp3 = None; // as for a VP at infinity
+        let text = file.to_json_string();
+        assert!(!text.contains("Infinity") && !text.contains("NaN"));
+        let back = CalibrationFile::from_json_str(&text, Path::new("c.json")).unwrap();
+        assert_eq!(back, file);
+        let again = back.camera().unwrap();
+        assert!((again.focal_px - cal.focal_px).abs() < 1e-9);
+        assert_eq!(back.opencv.as_ref().unwrap().units, "road_units");
+        assert_eq!(back.camera_height_m, None);
+    }
+
+    #[test]
+    fn a_scale_gives_metres_and_the_height() {
+        let cal = camera();
+        let mut file = CalibrationFile::calibrated(input(), &cal);
+        file.set_scale(0.5, None).unwrap();
+        let cv = file.opencv.as_ref().unwrap();
+        assert_eq!(cv.units, "m");
+        let h = file.camera_height_m.unwrap();
+        assert!((h - 0.5 * cal.plane_distance()).abs() < 1e-12);
+        let t = cv.tvec;
+        assert!(((t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt() - h).abs() < 1e-9);
+        let mut nothing = CalibrationFile::not_calibrated(input(), "too few vehicles".into());
+        assert!(nothing
+            .set_scale(0.5, None)
+            .unwrap_err()
+            .contains("too few vehicles"));
+    }
+
+    #[test]
+    fn version_1_files_still_read_and_others_are_refused() {
+        let v1 = r#"{"format": "vpcal-calibration/1", "status": "calibrated",
+            "vpcal_version": "0.1.0", "image_size": [1280, 720], "pp": [640, 360],
+            "focal_px": 1000, "vp1": [700, -300], "vp2": [-20000, -250], "vp3": [1, 2],
+            "scale_m_per_unit": null, "confidence": null, "settings": {}}"#;
+        let f = CalibrationFile::from_json_str(v1, Path::new("old.json")).unwrap();
+        assert_eq!(f.version(), Some(1));
+        assert!(f.camera().is_ok());
+        let e = CalibrationFile::from_json_str(
+            &v1.replace("calibration/1", "calibration/9"),
+            Path::new("new.json"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("new.json") && e.contains("versions [1, 2]"),
+            "{e}"
+        );
+        let e = CalibrationFile::from_json_str(r#"{"vp1": [1, 2]}"#, Path::new("s.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no \"format\" field"), "{e}");
+        let e = CalibrationFile::from_json_str(
+            &v1.replace("\"vp1\": [700, -300]", "\"vp1\": \"x\""),
+            Path::new("bad.json"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("bad.json") && e.contains("invalid type"), "{e}");
+        let missing = CalibrationFile::from_json_str(
+            &v1.replace("\"vp1\": [700, -300],", ""),
+            Path::new("m.json"),
+        )
+        .unwrap();
+        assert!(missing.camera().unwrap_err().contains("\"vp1\""));
+    }
+}

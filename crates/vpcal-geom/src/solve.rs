@@ -1,0 +1,259 @@
+//! Shared numerics: a Nelder-Mead minimiser with a convergence report, a small deterministic
+//! PRNG, medians and percentiles. One implementation of each for the whole workspace.
+
+/// Percentile `q` (0-100) of sorted values with linear interpolation (numpy's default).
+/// NaN for an empty slice.
+pub fn percentile_sorted(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let pos = q / 100.0 * (sorted.len() - 1) as f64;
+    let lo = pos.floor() as usize;
+    let hi = pos.ceil() as usize;
+    let frac = pos - lo as f64;
+    if lo == hi {
+        sorted[lo]
+    } else {
+        sorted[lo] + (sorted[hi] - sorted[lo]) * frac
+    }
+}
+
+/// Median of finite values (mean of the two middle ones for an even count); `None` when empty.
+pub fn median(values: &[f64]) -> Option<f64> {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| !x.is_nan()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    })
+}
+
+/// Weighted median: a minimiser of `Σ w_i |x - x_i|` (the lower one when the minimum is a
+/// segment). `None` when empty or when no weight is positive.
+pub fn weighted_median(values: &[f64], weights: &[f64]) -> Option<f64> {
+    let mut pairs: Vec<(f64, f64)> = values
+        .iter()
+        .zip(weights)
+        .filter(|(v, w)| v.is_finite() && w.is_finite() && **w > 0.0)
+        .map(|(v, w)| (*v, *w))
+        .collect();
+    if pairs.is_empty() {
+        return None;
+    }
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = pairs.iter().map(|p| p.1).sum();
+    let mut acc = 0.0;
+    for (v, w) in &pairs {
+        acc += w;
+        if acc >= total / 2.0 {
+            return Some(*v);
+        }
+    }
+    pairs.last().map(|p| p.0)
+}
+
+/// Percentile `q` (0-100) of unsorted values, as [`percentile_sorted`].
+pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    percentile_sorted(&v, q)
+}
+
+/// Population standard deviation (NaN for an empty slice).
+pub fn sd(v: &[f64]) -> f64 {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / n).sqrt()
+}
+
+/// A small deterministic PRNG (SplitMix64), so that the geometry crate needs no dependency.
+#[derive(Debug, Clone)]
+pub struct SplitMix(pub u64);
+
+impl SplitMix {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn next_f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Poisson(1) count (inverse transform).
+    pub fn poisson1(&mut self) -> f64 {
+        let u = self.next_f64();
+        let mut k = 0.0;
+        let mut p = (-1.0f64).exp();
+        let mut cdf = p;
+        while u > cdf && k < 20.0 {
+            k += 1.0;
+            p /= k;
+            cdf += p;
+        }
+        k
+    }
+}
+
+/// The result of [`nelder_mead`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Minimum {
+    /// The best point found.
+    pub x: Vec<f64>,
+    /// `f(x)`.
+    pub value: f64,
+    /// Iterations used.
+    pub iterations: usize,
+    /// Whether the simplex's values agreed to the tolerance before the iteration budget ran out.
+    pub converged: bool,
+}
+
+/// Relative spread of the simplex's values at which [`nelder_mead`] stops.
+pub const NELDER_MEAD_TOLERANCE: f64 = 1e-10;
+
+/// Minimise `f` from `x0` with initial steps `step` (Nelder-Mead with the standard
+/// coefficients: reflection 1, expansion 2, contraction 0.5, shrink 0.5), at most `iters`
+/// iterations; stops when the simplex's values agree to [`NELDER_MEAD_TOLERANCE`] relative.
+pub fn nelder_mead(f: impl Fn(&[f64]) -> f64, x0: &[f64], step: &[f64], iters: usize) -> Minimum {
+    let n = x0.len();
+    let mut simplex: Vec<(Vec<f64>, f64)> = Vec::with_capacity(n + 1);
+    simplex.push((x0.to_vec(), f(x0)));
+    for i in 0..n {
+        let mut x = x0.to_vec();
+        x[i] += step[i];
+        let v = f(&x);
+        simplex.push((x, v));
+    }
+    let mut iterations = 0;
+    let mut converged = false;
+    while iterations < iters {
+        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let spread = (simplex[n].1 - simplex[0].1).abs();
+        if spread <= NELDER_MEAD_TOLERANCE * (1.0 + simplex[0].1.abs()) {
+            converged = true;
+            break;
+        }
+        iterations += 1;
+        let mut centroid = vec![0.0; n];
+        for (x, _) in &simplex[..n] {
+            for (c, xi) in centroid.iter_mut().zip(x) {
+                *c += xi / n as f64;
+            }
+        }
+        let along = |t: f64| -> Vec<f64> {
+            centroid
+                .iter()
+                .zip(&simplex[n].0)
+                .map(|(c, w)| c + t * (w - c))
+                .collect()
+        };
+        let xr = along(-1.0);
+        let fr = f(&xr);
+        if fr < simplex[0].1 {
+            let xe = along(-2.0);
+            let fe = f(&xe);
+            simplex[n] = if fe < fr { (xe, fe) } else { (xr, fr) };
+        } else if fr < simplex[n - 1].1 {
+            simplex[n] = (xr, fr);
+        } else {
+            let xc = if fr < simplex[n].1 {
+                along(-0.5)
+            } else {
+                along(0.5)
+            };
+            let fc = f(&xc);
+            if fc < fr.min(simplex[n].1) {
+                simplex[n] = (xc, fc);
+            } else {
+                let best = simplex[0].0.clone();
+                for s in simplex.iter_mut().skip(1) {
+                    s.0 =
+                        s.0.iter()
+                            .zip(&best)
+                            .map(|(x, b)| b + 0.5 * (x - b))
+                            .collect();
+                    s.1 = f(&s.0);
+                }
+            }
+        }
+    }
+    simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let (x, value) = simplex.swap_remove(0);
+    Minimum {
+        x,
+        value,
+        iterations,
+        converged,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nelder_mead_finds_the_minimum_of_the_rosenbrock_valley() {
+        let rosen = |x: &[f64]| (1.0 - x[0]).powi(2) + 100.0 * (x[1] - x[0] * x[0]).powi(2);
+        let m = nelder_mead(rosen, &[-1.2, 1.0], &[0.1, 0.1], 2000);
+        assert!(m.converged, "{m:?}");
+        assert!(
+            (m.x[0] - 1.0).abs() < 1e-3 && (m.x[1] - 1.0).abs() < 1e-3,
+            "{m:?}"
+        );
+        assert!(m.value < 1e-6 && m.iterations < 2000);
+        // Too small a budget: the report says so.
+        let short = nelder_mead(rosen, &[-1.2, 1.0], &[0.1, 0.1], 5);
+        assert!(!short.converged && short.iterations == 5);
+        assert!(short.value <= rosen(&[-1.2, 1.0]));
+    }
+
+    #[test]
+    fn nelder_mead_on_a_quadratic_bowl_in_three_dimensions() {
+        let bowl =
+            |x: &[f64]| (x[0] - 3.0).powi(2) + 2.0 * (x[1] + 1.0).powi(2) + 0.5 * x[2] * x[2];
+        let m = nelder_mead(bowl, &[0.0, 0.0, 0.0], &[1.0, 1.0, 1.0], 1000);
+        assert!(m.converged);
+        for (got, want) in m.x.iter().zip([3.0, -1.0, 0.0]) {
+            assert!((got - want).abs() < 1e-3, "{m:?}");
+        }
+    }
+
+    #[test]
+    fn splitmix_is_deterministic_and_uniform() {
+        let mut a = SplitMix(7);
+        let mut b = SplitMix(7);
+        let xs: Vec<f64> = (0..10_000).map(|_| a.next_f64()).collect();
+        assert!(xs
+            .iter()
+            .zip((0..10_000).map(|_| b.next_f64()))
+            .all(|(x, y)| *x == y));
+        assert!(xs.iter().all(|x| (0.0..1.0).contains(x)));
+        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+        assert!((mean - 0.5).abs() < 0.01, "{mean}");
+        let p: Vec<f64> = (0..20_000).map(|_| a.poisson1()).collect();
+        let mean = p.iter().sum::<f64>() / p.len() as f64;
+        assert!((mean - 1.0).abs() < 0.03, "{mean}");
+    }
+
+    #[test]
+    fn medians_and_percentiles() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), Some(2.5));
+        assert_eq!(median(&[f64::NAN, 1.0]), Some(1.0));
+        assert_eq!(median(&[]), None);
+        assert_eq!(
+            weighted_median(&[1.0, 2.0, 10.0], &[1.0, 1.0, 5.0]),
+            Some(10.0)
+        );
+        assert_eq!(percentile(vec![1.0, 2.0, 3.0, 4.0], 50.0), 2.5);
+        assert_eq!(percentile_sorted(&[0.0, 10.0], 25.0), 2.5);
+        assert!(percentile(Vec::new(), 50.0).is_nan());
+        assert!((sd(&[1.0, 3.0]) - 1.0).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,253 @@
+//! Per-vehicle VP pairs to one camera: the aggregation methods, and what they report (a
+//! summary line, counts as JSON, the bootstrap's confidence).
+
+use vpcal_formats::calib::Confidence;
+use vpcal_formats::reference::VpOutItem;
+use vpcal_geom::aggregate::edgelets::Edgelet;
+use vpcal_geom::aggregate::reference::{self, ReferenceOptions};
+use vpcal_geom::aggregate::robust::{self, RobustOptions};
+use vpcal_geom::aggregate::tracks::TrackLine;
+use vpcal_geom::aggregate::{AggregateError, VehicleVps};
+use vpcal_geom::Point2;
+
+/// Aggregation method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Robust line intersection and focal fit (the paper's aggregation, made robust; the default). VP1 comes
+    /// from the vehicles' tracks when enough boxes of successive frames link into straight
+    /// tracks, else from the network's per-vehicle VP1 rays.
+    Robust,
+    /// The robust method with VP1 always from the network's per-vehicle VP1 rays.
+    RobustNetwork,
+    /// The paper's medians, exactly as the reference code computed them.
+    Reference,
+}
+
+impl Method {
+    /// Every method, by name (for flag parsers and help).
+    pub const NAMES: [&'static str; 3] = ["robust", "robust-network", "reference"];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Robust => "robust",
+            Method::RobustNetwork => "robust-network",
+            Method::Reference => "reference",
+        }
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Method, String> {
+        match s {
+            "robust" => Ok(Method::Robust),
+            "robust-network" => Ok(Method::RobustNetwork),
+            "reference" => Ok(Method::Reference),
+            _ => Err(format!(
+                "unknown aggregation method `{s}`: expected {}",
+                Method::NAMES.join(", ")
+            )),
+        }
+    }
+}
+
+/// The outcome of one aggregation: the two VPs and what to tell the user.
+#[derive(Debug, Clone)]
+pub struct Aggregated {
+    pub vp1: Point2,
+    pub vp2: Point2,
+    pub focal_px: f64,
+    pub summary: String,
+    /// What the method used (counts), as JSON for calibration files.
+    pub evidence: serde_json::Value,
+    /// Bootstrap spread of the robust method (none without bootstrap or for `reference`).
+    pub confidence: Option<Confidence>,
+    /// The straight vehicle tracks the robust method found (empty for the other methods).
+    pub track_lines: Vec<TrackLine>,
+}
+
+/// The items' edgelets, one list per item; empty when no item has any (files of other tools).
+pub fn edgelets_of(items: &[VpOutItem]) -> Vec<Vec<Edgelet>> {
+    if items.iter().all(|i| i.edgelets.is_empty()) {
+        return Vec::new();
+    }
+    items.iter().map(VpOutItem::edgelets).collect()
+}
+
+/// An optional angle for a summary line.
+fn deg(a: Option<f64>) -> String {
+    a.map_or("-".to_string(), |a| format!("{a:.2}°"))
+}
+
+/// "; the road curves (N tracks bend alike)" when the curved-road test set the tracks aside.
+fn curved_note(e: &robust::Evidence) -> String {
+    if e.curved_fit {
+        format!(
+            " (not used for VP1: the road curves, {} tracks bend alike; horizon and focal length \
+             from the track tangents and edgelets of {} vehicles)",
+            e.curved_tracks, e.curved_vehicles
+        )
+    } else if e.road_curved {
+        format!(
+            " (not used for VP1: the road curves, {} tracks bend alike)",
+            e.curved_tracks
+        )
+    } else {
+        String::new()
+    }
+}
+
+/// Aggregate with `method`; `image_size` is used by the robust method's priors.
+///
+/// # Errors
+/// "Not enough evidence" from the method.
+pub fn aggregate(
+    vehicles: &[VehicleVps],
+    edgelets: &[Vec<Edgelet>],
+    pp: Point2,
+    image_size: (u32, u32),
+    method: Method,
+    min_score: f64,
+    bootstrap: usize,
+) -> Result<Aggregated, AggregateError> {
+    match method {
+        Method::Reference => {
+            let r = reference::aggregate(vehicles, pp, &ReferenceOptions { min_score })?;
+            Ok(Aggregated {
+                vp1: r.vp1,
+                vp2: r.vp2,
+                focal_px: r.focal_px,
+                summary: format!(
+                    "reference: {} vehicles, {} above score {min_score}, {} with a real focal length",
+                    r.pairs_in, r.pairs_scored, r.pairs_used
+                ),
+                evidence: serde_json::json!({
+                    "method": "reference",
+                    "pairs_in": r.pairs_in,
+                    "pairs_scored": r.pairs_scored,
+                    "pairs_used": r.pairs_used,
+                }),
+                confidence: None,
+                track_lines: Vec::new(),
+            })
+        }
+        Method::Robust | Method::RobustNetwork => {
+            let defaults = RobustOptions::default();
+            let options = RobustOptions {
+                min_score,
+                image_size: Some([f64::from(image_size.0), f64::from(image_size.1)]),
+                bootstrap,
+                tracks: defaults.tracks.clone().filter(|_| method == Method::Robust),
+                ..defaults
+            };
+            let r = robust::aggregate_with_edgelets(vehicles, edgelets, pp, &options)?;
+            let e = &r.evidence;
+            let mut summary = format!(
+                "robust: {} vehicles, {} used (effective weight {:.0}, {} repeated boxes down-weighted), \
+                 {} VP1 inliers ({}), {} VP2 inliers, roll {:.2}°, {}",
+                e.pairs_in,
+                e.pairs_used,
+                e.effective_vehicles,
+                e.repeated_boxes,
+                e.vp1_inliers,
+                if e.vp1_from_tracks {
+                    format!(
+                        "VP1 from {} vehicle tracks, median angle {}; the network's rays {}",
+                        e.track_lines,
+                        deg(e.track_residual_deg),
+                        deg(e.vp1_ray_scatter_deg)
+                    )
+                } else if e.vp1_from_edgelets {
+                    format!(
+                        "VP1 from {} edgelets along the vehicles; the network's rays {}, {} straight vehicle tracks{}",
+                        e.vp1_edgelets,
+                        deg(e.vp1_ray_scatter_deg),
+                        e.track_lines,
+                        curved_note(e)
+                    )
+                } else {
+                    format!(
+                        "VP1 from the network's rays, median angle {}; {} straight vehicle tracks, {}{}",
+                        deg(e.vp1_ray_scatter_deg),
+                        e.track_lines,
+                        deg(e.track_residual_deg),
+                        curved_note(e)
+                    )
+                },
+                e.vp2_inliers,
+                r.roll.to_degrees(),
+                {
+                    let rays = if e.rays_trusted {
+                        "VP2 points agree with the rays (data trusted)"
+                    } else {
+                        "VP2 points disagree with the rays (focal prior in use)"
+                    };
+                    let edges = format!("{} edgelets on {} vehicles", e.edgelets, e.edgelet_vehicles);
+                    if e.focal_from_edgelets {
+                        format!("roll and focal length from {edges}")
+                    } else if e.roll_from_edgelets {
+                        format!("roll from {edges} (VP2 too far for the focal length); {rays}")
+                    } else if e.edgelets > 0 {
+                        format!("{rays}; {edges} not used (roll ±{})", deg(e.edgelet_roll_sd_deg))
+                    } else {
+                        rays.to_string()
+                    }
+                }
+            );
+            if let Some(c) = &r.confidence {
+                summary.push_str(&format!(
+                    "; focal 68% interval {:.0}-{:.0} px (VP2 rays alone: {:.0} px), horizon ±{:.2}°",
+                    c.focal_px_p16, c.focal_px_p84, c.focal_px_data_only, c.horizon_angle_sd_deg
+                ));
+            }
+            let evidence = serde_json::json!({
+                "method": method.name(),
+                "pairs_in": e.pairs_in,
+                "pairs_used": e.pairs_used,
+                "effective_vehicles": e.effective_vehicles,
+                "repeated_boxes": e.repeated_boxes,
+                "vp1_inliers": e.vp1_inliers,
+                "vp2_inliers": e.vp2_inliers,
+                "rays_trusted": e.rays_trusted,
+                "track_lines": e.track_lines,
+                "vp1_from_tracks": e.vp1_from_tracks,
+                "vp1_ray_scatter_deg": e.vp1_ray_scatter_deg,
+                "track_residual_deg": e.track_residual_deg,
+                "curved_tracks": e.curved_tracks,
+                "road_curved": e.road_curved,
+                "curved_fit": e.curved_fit,
+                "curved_vehicles": e.curved_vehicles,
+                "vp1_from_edgelets": e.vp1_from_edgelets,
+                "vp1_edgelets": e.vp1_edgelets,
+                "edgelets": e.edgelets,
+                "edgelet_vehicles": e.edgelet_vehicles,
+                "roll_from_edgelets": e.roll_from_edgelets,
+                "focal_from_edgelets": e.focal_from_edgelets,
+                "edgelet_focal_px": e.edgelet_focal_px,
+                "edgelet_roll_sd_deg": e.edgelet_roll_sd_deg,
+                "edgelet_focal_log_spread": e.edgelet_focal_log_spread,
+                "edgelet_vp2_widths": e.edgelet_vp2_widths,
+                "roll_deg": r.roll.to_degrees(),
+                "ray_bias_deg": r.ray_bias.to_degrees(),
+            });
+            let confidence = r.confidence.as_ref().map(|c| Confidence {
+                focal_px_p16: c.focal_px_p16,
+                focal_px_p84: c.focal_px_p84,
+                focal_px_vp2_rays_only: c.focal_px_data_only,
+                horizon_angle_sd_deg: c.horizon_angle_sd_deg,
+                vp1_sd_px: c.vp1_sd_px,
+                resamples: c.resamples,
+            });
+            Ok(Aggregated {
+                vp1: r.calibration.vp1,
+                vp2: r.calibration.vp2,
+                focal_px: r.calibration.focal_px,
+                summary,
+                evidence,
+                confidence,
+                track_lines: r.track_lines,
+            })
+        }
+    }
+}

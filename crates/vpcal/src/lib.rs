@@ -1,0 +1,28 @@
+//! vpcal: calibrate fixed traffic cameras from the vanishing points of the vehicles they see.
+//!
+//! The whole pipeline as a library, for the `vpcal` binary, the Python package and anyone who
+//! calls it in process:
+//!
+//! - [`pipeline`]: [`PipelineConfig`], [`run_pipeline`] (footage to per-vehicle VP records)
+//!   and [`calibrate`] (records to a camera).
+//! - [`detector`]: which vehicle detector, and its settings.
+//! - [`aggregate`]: per-vehicle VP pairs to one camera, with a summary and evidence.
+//! - [`output`]: the calibration file, the BrnoCompSpeed system file and vehicle records.
+//! - [`overlay`]: the picture of a calibration (horizon, road grid, vehicle VP directions).
+//! - [`model`]: the bundled VP network.
+//! - [`progress`]: progress reports of long work.
+//!
+//! The building blocks live in the other crates of the workspace: geometry and aggregation
+//! (`vpcal-geom`), file formats (`vpcal-formats`, with the calibration file type), the network
+//! (`vpcal-net`), footage and detectors (`vpcal-video`), the synthetic world (`vpcal-synth`).
+
+pub mod aggregate;
+pub mod detector;
+pub mod model;
+pub mod output;
+pub mod overlay;
+pub mod pipeline;
+pub mod progress;
+
+pub use pipeline::{calibrate, run_pipeline, run_pipeline_on, PipelineConfig, PipelineOutput};
+pub use vpcal_formats::calib::CalibrationFile;

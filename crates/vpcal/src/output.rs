@@ -1,0 +1,169 @@
+//! What a calibration run writes: the calibration file, the BrnoCompSpeed system file, the
+//! per-vehicle records; and the checks that let a run fail before it starts, not after.
+
+use std::path::Path;
+
+use anyhow::{bail, Result};
+use serde_json::{json, Map, Value};
+use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
+use vpcal_formats::calib::{CalibrationFile, Dropped, InputSummary};
+use vpcal_formats::reference::{write_vpout, VpOutItem};
+use vpcal_geom::camera::Calibration;
+use vpcal_video::{SourceKind, Start};
+
+use crate::aggregate::Aggregated;
+use crate::pipeline::{PipelineConfig, PipelineOutput};
+
+/// How calibration files name a kind of input.
+pub fn kind_name(kind: SourceKind) -> &'static str {
+    match kind {
+        SourceKind::Video => "video",
+        SourceKind::ImageFolder => "image_folder",
+        SourceKind::SingleImage => "image",
+    }
+}
+
+/// The input part of a calibration file.
+pub fn input_summary(out: &PipelineOutput) -> InputSummary {
+    let s = &out.stats;
+    InputSummary {
+        path: out.info.path.display().to_string(),
+        kind: Some(kind_name(out.info.kind).to_string()),
+        width: out.info.width,
+        height: out.info.height,
+        fps: out.info.fps,
+        codec: out.info.codec.clone(),
+        frames_processed: s.frames,
+        frames_replayed: s.replayed_frames,
+        detections: s.detections,
+        dropped: Dropped {
+            low_score: s.dropped_low_score,
+            r#static: s.dropped_static,
+            over_limit: s.dropped_over_limit,
+            outside_frame: s.dropped_outside,
+            seen_before: s.dropped_seen,
+        },
+        vehicle_boxes: s.crops,
+        seconds: s.seconds,
+    }
+}
+
+/// The settings of a pipeline run, by flag name.
+pub fn settings(out: &PipelineOutput, c: &PipelineConfig) -> Map<String, Value> {
+    let v = json!({
+        "model": out.model,
+        "device": c.device,
+        "detector": out.detector,
+        "every": c.frames.every,
+        "fps": c.frames.image_fps,
+        "max_frames": c.frames.max_frames,
+        "start": match c.frames.start {
+            Start::Beginning => Value::Null,
+            Start::Frame(n) => json!(n),
+            Start::Seconds(t) => json!(format!("{t}s")),
+        },
+        "min_score": c.min_score,
+        "drop_static": !c.keep_static,
+        "max_per_frame": c.max_per_frame,
+        "method": c.method.name(),
+        "flip_average": c.flip_average,
+        "edgelets": c.edgelets,
+        "replay": c.replay,
+        "bootstrap": c.bootstrap,
+        "pp": c.pp.to_json(),
+    });
+    match v {
+        Value::Object(m) => m,
+        _ => Map::new(),
+    }
+}
+
+/// The calibration file of camera `cal` aggregated as `agg` from a pipeline run.
+pub fn calibration_file(
+    out: &PipelineOutput,
+    config: &PipelineConfig,
+    cal: &Calibration,
+    agg: &Aggregated,
+) -> CalibrationFile {
+    let mut file = CalibrationFile::calibrated(input_summary(out), cal);
+    file.evidence = Some(agg.evidence.clone());
+    file.confidence = agg.confidence.clone();
+    file.summary = Some(agg.summary.clone());
+    file.settings = settings(out, config);
+    file
+}
+
+/// The calibration file of a run that found no camera, for `reason`.
+pub fn failure_file(
+    out: &PipelineOutput,
+    config: &PipelineConfig,
+    reason: String,
+) -> CalibrationFile {
+    let mut file = CalibrationFile::not_calibrated(input_summary(out), reason);
+    file.settings = settings(out, config);
+    file
+}
+
+/// Write `cal` as a BrnoCompSpeed system file (scale 1 without a metric scale).
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_bcs_system(path: &Path, cal: &Calibration, scale: Option<f64>) -> Result<()> {
+    let system = SystemFile::new(SystemCalibration {
+        vp1: cal.vp1,
+        vp2: cal.vp2,
+        pp: cal.pp,
+        scale: scale.unwrap_or(1.0),
+    });
+    write_system(path, &system)?;
+    Ok(())
+}
+
+/// Write the per-vehicle records of a run (deep_vp's `VPout` layout, strict JSON).
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_vehicles(path: &Path, out: &PipelineOutput) -> Result<()> {
+    let (w, h) = (out.info.width, out.info.height);
+    let items: Vec<VpOutItem> = out.records.iter().map(|r| r.to_vpout(w, h)).collect();
+    write_vpout(path, &items)?;
+    Ok(())
+}
+
+/// An output file can be created at `path`: its folder exists and is writable, and `path`
+/// is not a folder. `flag` names the option in the error.
+///
+/// # Errors
+/// A message naming the flag and the path.
+pub fn check_destination(flag: &str, path: &Path) -> Result<()> {
+    if path.is_dir() {
+        bail!(
+            "{flag} {}: is a folder, expected a file name",
+            path.display()
+        );
+    }
+    let dir = match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        bail!(
+            "{flag} {}: the folder {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    // Writable: create and remove a probe file next to it.
+    let probe = dir.join(format!(".vpcal-write-test-{}", std::process::id()));
+    match std::fs::File::create(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => bail!(
+            "{flag} {}: cannot write in {}: {e}",
+            path.display(),
+            dir.display()
+        ),
+    }
+}

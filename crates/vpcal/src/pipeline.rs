@@ -1,0 +1,666 @@
+//! The calibration pipeline, in process: footage of a fixed traffic camera to per-vehicle
+//! VP records, and the records to a camera.
+//!
+//! ```text
+//! frames (ffmpeg | folder | image) -> detector (learned | motion | file) -> per-frame filter
+//!   -> crops (bicubic, network input) -> VP network, batched -> decode with scale selection
+//!   -> VPs in frame pixels, one record per vehicle box -> aggregation (robust | reference)
+//! ```
+//!
+//! Memory stays bounded: frames are dropped as soon as their crops are cut; only the
+//! per-vehicle records (a few hundred bytes each) and one picture for the overlay are kept.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use image::RgbImage;
+use vpcal_formats::reference::VpOutItem;
+use vpcal_geom::aggregate::edgelets::{near_rays, Edgelet, EdgeletFitOptions};
+use vpcal_geom::aggregate::VehicleVps;
+use vpcal_geom::camera::Calibration;
+use vpcal_geom::heatmap::VpPrediction;
+use vpcal_geom::{BoxPx, Point2};
+use vpcal_net::VpNet;
+use vpcal_video::crop::{CropFilter, CropResizer};
+use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
+use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
+use vpcal_video::{Detector, Frame, FrameSource, SourceInfo, SourceKind, SourceOptions};
+
+use crate::aggregate::{aggregate, Aggregated, Method};
+use crate::detector::{open_detector, DetectorSettings};
+use crate::model::load_model;
+use crate::progress::{FrameProgress, Progress};
+
+/// IoU above which a box of a still is the vehicle a box of an earlier still was (parked cars
+/// in a folder of pictures of one camera move by a few pixels at most between detections).
+pub const STILLS_SEEN_IOU: f64 = 0.7;
+
+/// At most this many records keep their edgelets (see [`EdgeletBudget`]): the aggregation
+/// fits at most 20,000 edgelets, which 4096 vehicles' near-ray edgelets cover many times.
+pub const EDGELET_RECORDS: usize = 4096;
+
+/// The principal point when none is given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PrincipalPoint {
+    /// The image centre `(W/2, H/2)`: pixel `(i, j)` covers `[i, i+1) x [j, j+1)`, the
+    /// coordinates of vpcal's frames, boxes and crops.
+    Centre,
+    /// BrnoCompSpeed's `(W/2 + 0.5, H/2 + 0.5)`, for VPs computed in its convention.
+    Bcs,
+    /// A given point, pixels.
+    At(Point2),
+}
+
+impl PrincipalPoint {
+    /// The point for a `width` x `height` image.
+    pub fn resolve(self, width: u32, height: u32) -> Point2 {
+        let (w, h) = (f64::from(width), f64::from(height));
+        match self {
+            PrincipalPoint::Centre => Point2::new(w / 2.0, h / 2.0),
+            PrincipalPoint::Bcs => Point2::new(w / 2.0 + 0.5, h / 2.0 + 0.5),
+            PrincipalPoint::At(p) => p,
+        }
+    }
+
+    /// How settings files record it: `centre`, `bcs` or `[x, y]`.
+    pub fn to_json(self) -> serde_json::Value {
+        match self {
+            PrincipalPoint::Centre => "centre".into(),
+            PrincipalPoint::Bcs => "bcs".into(),
+            PrincipalPoint::At(p) => serde_json::json!([p.x, p.y]),
+        }
+    }
+}
+
+impl std::str::FromStr for PrincipalPoint {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<PrincipalPoint, String> {
+        match s {
+            "centre" | "center" => Ok(PrincipalPoint::Centre),
+            "bcs" => Ok(PrincipalPoint::Bcs),
+            _ => {
+                let parts: Vec<Option<f64>> = s
+                    .split(',')
+                    .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+                    .collect();
+                match parts[..] {
+                    [Some(x), Some(y)] => Ok(PrincipalPoint::At(Point2::new(x, y))),
+                    _ => Err(format!(
+                        "expected `centre`, `bcs` or a point x,y (finite numbers), got {s:?}"
+                    )),
+                }
+            }
+        }
+    }
+}
+
+/// Everything the pipeline needs to know, validated by [`PipelineConfig::validate`].
+#[derive(Debug, Clone)]
+pub struct PipelineConfig {
+    /// VP network weights; `None`: the bundled model.
+    pub model: Option<PathBuf>,
+    /// `cpu`, or `wgpu` in builds with that feature.
+    pub device: String,
+    /// Crops per network batch.
+    pub batch: usize,
+    /// Average every crop's heatmaps with its mirror image's.
+    pub flip_average: bool,
+    /// Look for edgelets inside the boxes (VP2 evidence for the roll and focal length).
+    pub edgelets: bool,
+    /// Look again at the frames the motion detector spent learning its background.
+    pub replay: bool,
+    /// Which frames are processed (`image_fps` makes a folder a frame sequence).
+    pub frames: SourceOptions,
+    pub detector: DetectorSettings,
+    /// Drop boxes whose detector score is not above this.
+    pub min_score: f64,
+    /// Keep vehicles that do not move between processed frames.
+    pub keep_static: bool,
+    /// At most this many boxes per frame, best first (0: no limit).
+    pub max_per_frame: usize,
+    pub method: Method,
+    /// Bootstrap resamples of the robust method (0: none).
+    pub bootstrap: usize,
+    pub pp: PrincipalPoint,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> PipelineConfig {
+        PipelineConfig {
+            model: None,
+            device: "cpu".to_string(),
+            batch: 32,
+            flip_average: false,
+            edgelets: true,
+            replay: true,
+            frames: SourceOptions::default(),
+            detector: DetectorSettings::default(),
+            min_score: 0.1,
+            keep_static: false,
+            max_per_frame: 10,
+            method: Method::Robust,
+            bootstrap: 30,
+            pp: PrincipalPoint::Centre,
+        }
+    }
+}
+
+impl PipelineConfig {
+    /// Check the settings that do not depend on the input.
+    ///
+    /// # Errors
+    /// A message naming the setting (by its flag) and what was expected.
+    pub fn validate(&self) -> Result<()> {
+        if self.batch == 0 {
+            bail!("--batch must be at least 1");
+        }
+        if !self.min_score.is_finite() {
+            bail!("--min-score must be a number");
+        }
+        self.frames
+            .validate()
+            .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;
+        self.detector.validate()
+    }
+}
+
+/// Open `input` with frame selection `options`, checked: a bad selection, or a frame rate
+/// for a video (which has its own), is an error naming the flag.
+///
+/// # Errors
+/// The selection's or the source's error, naming the input.
+pub fn open_input(input: &Path, options: &SourceOptions) -> Result<Box<dyn FrameSource>> {
+    options
+        .validate()
+        .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;
+    let source = vpcal_video::open_source(input, options)
+        .with_context(|| format!("opening {}", input.display()))?;
+    if options.image_fps.is_some() && source.info().kind == SourceKind::Video {
+        bail!(
+            "--fps applies to image folders; the video {} has its own frame rate",
+            input.display()
+        );
+    }
+    Ok(source)
+}
+
+/// One vehicle box seen by the network.
+#[derive(Debug, Clone)]
+pub struct VehicleRecord {
+    /// 0-based frame index in the source.
+    pub frame: u64,
+    /// Detector score.
+    pub score: f32,
+    /// The box frame of the crop (clamped integer box), frame pixels.
+    pub crop_box: BoxPx,
+    /// The decoded network output, box frame.
+    pub prediction: VpPrediction,
+    /// VP1 and VP2 in frame pixels.
+    pub vp1: Point2,
+    pub vp2: Point2,
+    /// Edgelets inside the box near the network's VP rays (empty with `--no-edgelets`).
+    pub edgelets: Vec<Edgelet>,
+}
+
+impl VehicleRecord {
+    pub fn to_vehicle(&self) -> VehicleVps {
+        VehicleVps {
+            vp1: self.vp1,
+            vp2: self.vp2,
+            score: f64::from(self.score),
+            box_px: Some(self.crop_box),
+            frame: Some(self.frame as f64),
+            vp1_spread: Some(self.prediction.vp1_spread()),
+            vp2_spread: Some(self.prediction.vp2_spread()),
+        }
+    }
+
+    /// The record in deep_vp's `VPout` layout (frame-normalised box `[ymin, xmin, ymax, xmax]`).
+    pub fn to_vpout(&self, width: u32, height: u32) -> VpOutItem {
+        let b = &self.crop_box;
+        let (w, h) = (f64::from(width), f64::from(height));
+        let p = &self.prediction;
+        VpOutItem {
+            frame_cnt: self.frame as f64,
+            score: f64::from(self.score),
+            vp1: self.vp1,
+            vp2: self.vp2,
+            box_norm: Some([b.y0 / h, b.x0 / w, b.y1 / h, b.x1 / w]),
+            box_center: Some(b.center()),
+            box_scale: Some(b.half_size()),
+            vp_box: Some([b.y0, b.x0, b.y1, b.x1]),
+            vp1_box: Some(p.vp1),
+            vp2_box: Some(p.vp2),
+            pred_vps: p
+                .per_scale
+                .iter()
+                .map(|[a, b]| [a.x, a.y, b.x, b.y])
+                .collect(),
+            pred_vars: p.spreads.clone(),
+            vp1_var: Some(p.vp1_spread()),
+            vp2_var: Some(p.vp2_spread()),
+            edgelets: self
+                .edgelets
+                .iter()
+                .map(|e| [e.x, e.y, e.angle, e.strength])
+                .collect(),
+        }
+    }
+}
+
+/// Counts of what the pipeline saw.
+#[derive(Debug, Clone, Default)]
+pub struct PipelineStats {
+    pub frames: u64,
+    /// Frames looked at a second time, after the detector's warm-up (see [`run_pipeline_on`]).
+    pub replayed_frames: u64,
+    pub detections: u64,
+    pub dropped_low_score: u64,
+    pub dropped_static: u64,
+    pub dropped_over_limit: u64,
+    pub dropped_outside: u64,
+    /// Boxes of a still-image folder at the place of a box kept in an earlier picture.
+    pub dropped_seen: u64,
+    pub crops: u64,
+    pub seconds: f64,
+}
+
+/// Everything the pipeline produced before aggregation.
+#[derive(Debug)]
+pub struct PipelineOutput {
+    pub info: SourceInfo,
+    pub detector: String,
+    pub model: String,
+    pub records: Vec<VehicleRecord>,
+    pub stats: PipelineStats,
+    /// A picture of the scene for the overlay: the last frame.
+    pub picture: Option<RgbImage>,
+    /// What the user should know about the input (a truncated video, unreadable pictures).
+    pub warnings: Vec<String>,
+}
+
+/// Records keep their edgelets for an evenly spaced subset of at most `cap` of them: every
+/// record at first; whenever more than `cap` hold edgelets, only every second of those keeps
+/// them, and so on. The aggregation fits at most 20,000 edgelets (a few hundred vehicles), so
+/// this bounds memory and time on long inputs (an hour at every frame is ~450,000 records) and
+/// changes nothing on short ones.
+#[derive(Debug)]
+pub struct EdgeletBudget {
+    cap: usize,
+    stride: usize,
+    holding: usize,
+}
+
+impl EdgeletBudget {
+    pub fn new(cap: usize) -> EdgeletBudget {
+        EdgeletBudget {
+            cap,
+            stride: 1,
+            holding: 0,
+        }
+    }
+
+    /// Whether the record with this index keeps its edgelets.
+    pub fn keeps(&self, index: usize) -> bool {
+        index % self.stride == 0
+    }
+
+    /// Account for the record just pushed (the last one); `edgelets` gives a record's list.
+    pub fn pushed<T>(&mut self, records: &mut [T], edgelets: impl Fn(&mut T) -> &mut Vec<Edgelet>) {
+        let Some(i) = records.len().checked_sub(1) else {
+            return;
+        };
+        if !self.keeps(i) {
+            *edgelets(&mut records[i]) = Vec::new();
+            return;
+        }
+        if !edgelets(&mut records[i]).is_empty() {
+            self.holding += 1;
+        }
+        while self.holding > self.cap {
+            self.stride *= 2;
+            self.holding = 0;
+            for (j, r) in records.iter_mut().enumerate() {
+                let list = edgelets(r);
+                if j % self.stride != 0 {
+                    *list = Vec::new();
+                } else if !list.is_empty() {
+                    self.holding += 1;
+                }
+            }
+        }
+    }
+}
+
+/// A crop waiting for its batch: frame, score, crop box, edgelets in the box.
+type Pending = (u64, f32, BoxPx, Vec<Edgelet>);
+
+/// Everything after the detector: filter, crops, edgelets, batched network, records.
+struct Stages<'a> {
+    net: &'a VpNet,
+    config: &'a PipelineConfig,
+    resizer: CropResizer,
+    crop_len: usize,
+    /// Crops waiting for a full batch, and their (frame, score, box, edgelets).
+    pending: Vec<f32>,
+    pending_meta: Vec<Pending>,
+    records: Vec<VehicleRecord>,
+    budget: EdgeletBudget,
+    edgelet_options: EdgeletOptions,
+    gate: EdgeletFitOptions,
+    stats: PipelineStats,
+}
+
+impl<'a> Stages<'a> {
+    fn new(net: &'a VpNet, config: &'a PipelineConfig) -> Result<Stages<'a>> {
+        let resizer = CropResizer::new(net.config().input_size as u32, CropFilter::default())?;
+        let crop_len = resizer.crop_len();
+        Ok(Stages {
+            net,
+            config,
+            resizer,
+            crop_len,
+            pending: Vec::with_capacity(config.batch * crop_len),
+            pending_meta: Vec::with_capacity(config.batch),
+            records: Vec::new(),
+            budget: EdgeletBudget::new(EDGELET_RECORDS),
+            edgelet_options: EdgeletOptions::default(),
+            gate: EdgeletFitOptions::default(),
+            stats: PipelineStats::default(),
+        })
+    }
+
+    /// The per-frame filter (each pass over the frames gets its own: it compares a frame's
+    /// boxes with the previous frame's). Stills are not consecutive frames: there a vehicle
+    /// that stays in place (parked) counts once instead of being dropped as static.
+    fn filter(&self, info: &SourceInfo) -> FrameFilter {
+        let stills = is_stills(info);
+        FrameFilter::new(FilterConfig {
+            min_score: Some(self.config.min_score as f32),
+            drop_static: !self.config.keep_static && !stills,
+            drop_seen_iou: (stills && !self.config.keep_static).then_some(STILLS_SEEN_IOU),
+            max_per_frame: (self.config.max_per_frame > 0).then_some(self.config.max_per_frame),
+            ..FilterConfig::default()
+        })
+    }
+
+    /// Detect, filter and crop the vehicles of one frame; full batches go through the network.
+    fn frame(
+        &mut self,
+        frame: &Frame,
+        detector: &mut dyn Detector,
+        filter: &mut FrameFilter,
+    ) -> Result<()> {
+        let dets = detector
+            .detect(frame)
+            .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
+        self.stats.detections += dets.len() as u64;
+        let filtered = filter.apply(frame, dets);
+        for (_, why) in &filtered.dropped {
+            match why {
+                DropReason::LowScore => self.stats.dropped_low_score += 1,
+                DropReason::Static => self.stats.dropped_static += 1,
+                DropReason::OverLimit => self.stats.dropped_over_limit += 1,
+                DropReason::OutsideFrame => self.stats.dropped_outside += 1,
+                DropReason::SeenBefore => self.stats.dropped_seen += 1,
+            }
+        }
+        if filtered.kept.is_empty() {
+            return Ok(());
+        }
+        let boxes: Vec<BoxPx> = filtered.kept.iter().map(|d| d.bbox).collect();
+        let batch = self.resizer.crop_batch(&frame.image, &boxes)?;
+        let len = self.crop_len;
+        for (k, (&src, &bp)) in batch.source.iter().zip(&batch.boxes).enumerate() {
+            self.pending
+                .extend_from_slice(&batch.images[k * len..(k + 1) * len]);
+            let index = self.records.len() + self.pending_meta.len();
+            let edgelets = if !self.config.edgelets || !self.budget.keeps(index) {
+                Vec::new()
+            } else {
+                edgelets_in_box(&frame.image, &bp, &self.edgelet_options)
+            };
+            self.pending_meta
+                .push((frame.index, filtered.kept[src].score, bp, edgelets));
+            self.stats.crops += 1;
+            if self.pending_meta.len() >= self.config.batch {
+                self.flush()?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Run the waiting crops through the network and keep their records.
+    fn flush(&mut self) -> Result<()> {
+        if self.pending_meta.is_empty() {
+            return Ok(());
+        }
+        let preds = self.net.predict_prepared(&self.pending)?;
+        for ((frame, score, crop_box, edgelets), p) in self.pending_meta.drain(..).zip(preds) {
+            let prediction = p.vp;
+            let vp1 = crop_box.frame_from_box(prediction.vp1);
+            let vp2 = crop_box.frame_from_box(prediction.vp2);
+            // Only the edgelets near the network's VP rays are kept (memory).
+            let edgelets = near_rays(
+                crop_box.center(),
+                vp1,
+                vp2,
+                &edgelets,
+                self.gate.gate_vp2_deg,
+                self.gate.max_per_vehicle,
+            );
+            self.records.push(VehicleRecord {
+                frame,
+                score,
+                crop_box,
+                vp1,
+                vp2,
+                prediction,
+                edgelets,
+            });
+            self.budget.pushed(&mut self.records, |r| &mut r.edgelets);
+        }
+        self.pending.clear();
+        Ok(())
+    }
+}
+
+/// Run frames -> detections -> filter -> crops -> network on the video, image folder or image
+/// at `input`, returning per-vehicle records.
+///
+/// # Errors
+/// Bad settings, an unreadable input, a failing detector or network.
+pub fn run_pipeline(
+    input: &Path,
+    config: &PipelineConfig,
+    progress: &dyn Progress,
+) -> Result<PipelineOutput> {
+    let mut open = || open_input(input, &config.frames);
+    run_pipeline_on(&mut open, config, progress)
+}
+
+/// [`run_pipeline`] on frames from `open`, which gives a fresh source each time it is called
+/// (twice when the detector's warm-up frames are looked at again).
+///
+/// A detector that spends the first frames learning (the motion detector's warm-up) gets a
+/// second look at them once the main pass is done: the input is opened again and those
+/// frames go through [`Detector::replay`] (unless `replay` is off).
+///
+/// # Errors
+/// As [`run_pipeline`].
+pub fn run_pipeline_on(
+    open: &mut dyn FnMut() -> Result<Box<dyn FrameSource>>,
+    config: &PipelineConfig,
+    progress: &dyn Progress,
+) -> Result<PipelineOutput> {
+    config.validate()?;
+    let mut source = open()?;
+    let (net, model) = load_model(config.model.as_deref(), &config.device)?;
+    let net = net.with_flip_average(config.flip_average);
+    let info = source.info().clone();
+    let input = info.path.clone();
+    let mut detector = open_detector(&config.detector, &info)?;
+    let detector_name = detector.name();
+    let mut stages = Stages::new(&net, config)?;
+    let mut filter = stages.filter(&info);
+
+    progress.start(info.expected_frames(&config.frames));
+    let t0 = Instant::now();
+    let mut last_frame: Option<RgbImage> = None;
+    let mut warnings = Vec::new();
+    // Frames of the main pass that only taught the detector.
+    let mut learning_frames = 0u64;
+    let report = |stages: &Stages| {
+        let s = &stages.stats;
+        progress.frame_done(&FrameProgress {
+            frames: s.frames + s.replayed_frames,
+            seconds: t0.elapsed().as_secs_f64(),
+            vehicle_boxes: s.crops,
+        });
+    };
+    for frame in source.by_ref() {
+        let frame = match frame {
+            Ok(f) => f,
+            // A damaged or truncated input keeps the frames it gave.
+            Err(e) if stages.stats.frames > 0 => {
+                warnings.push(format!(
+                    "{}: stopped reading after {} frames: {e}; the frames before it are used",
+                    input.display(),
+                    stages.stats.frames
+                ));
+                break;
+            }
+            Err(e) => return Err(e).with_context(|| format!("reading {}", input.display())),
+        };
+        stages.stats.frames += 1;
+        stages.frame(&frame, detector.as_mut(), &mut filter)?;
+        if detector
+            .learned_until()
+            .is_none_or(|until| frame.index < until)
+        {
+            learning_frames += 1;
+        }
+        report(&stages);
+        last_frame = Some(frame.image);
+    }
+    for w in source.warnings() {
+        warnings.push(format!("{}: {w}", input.display()));
+    }
+    drop(source);
+    let replay = match (detector.learned_until(), detector.replay()) {
+        (Some(until), Some(replay)) if config.replay && learning_frames > 0 => {
+            Some((until, replay))
+        }
+        _ => None,
+    };
+    if let Some((until, mut replay)) = replay {
+        progress.add_frames(learning_frames);
+        let mut source = open().with_context(|| format!("opening {} again", input.display()))?;
+        let mut filter = stages.filter(&info);
+        for frame in source.by_ref() {
+            let Ok(frame) = frame else { break };
+            if frame.index >= until {
+                break;
+            }
+            stages.stats.replayed_frames += 1;
+            stages.frame(&frame, replay.as_mut(), &mut filter)?;
+            report(&stages);
+        }
+    }
+    stages.flush()?;
+    progress.finish();
+    let Stages {
+        mut records,
+        mut stats,
+        ..
+    } = stages;
+    if stats.frames == 0 {
+        bail!(
+            "{}: no frames to process (empty input, or --start/--max-frames select none)",
+            input.display()
+        );
+    }
+    // The replayed frames come first in the stream.
+    records.sort_by_key(|r| r.frame);
+    stats.seconds = t0.elapsed().as_secs_f64();
+    Ok(PipelineOutput {
+        info,
+        detector: detector_name,
+        model,
+        records,
+        stats,
+        picture: last_frame,
+        warnings,
+    })
+}
+
+/// Whether the input is stills rather than consecutive frames: one image, or a folder of
+/// images without a frame rate (`--fps`) (with it, the folder is a frame sequence and is treated as video).
+pub fn is_stills(info: &SourceInfo) -> bool {
+    match info.kind {
+        SourceKind::Video => false,
+        SourceKind::SingleImage => true,
+        SourceKind::ImageFolder => info.fps.is_none(),
+    }
+}
+
+/// Aggregate the records of `out` into a camera.
+///
+/// # Errors
+/// "Not enough evidence" (or a degenerate camera) as an error message.
+pub fn calibrate(
+    out: &PipelineOutput,
+    config: &PipelineConfig,
+) -> Result<(Calibration, Aggregated)> {
+    let pp = config.pp.resolve(out.info.width, out.info.height);
+    let vehicles: Vec<VehicleVps> = out.records.iter().map(VehicleRecord::to_vehicle).collect();
+    let edgelets: Vec<Vec<Edgelet>> = out.records.iter().map(|r| r.edgelets.clone()).collect();
+    let agg = aggregate(
+        &vehicles,
+        &edgelets,
+        pp,
+        (out.info.width, out.info.height),
+        config.method,
+        config.min_score,
+        config.bootstrap,
+    )?;
+    let cal = Calibration::from_vps(agg.vp1, agg.vp2, pp)
+        .map_err(|e| anyhow::anyhow!("the aggregated vanishing points give no camera: {e}"))?;
+    Ok((cal, agg))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_edgelet_budget_keeps_an_evenly_spaced_bounded_subset() {
+        let one = vec![Edgelet {
+            x: 1.0,
+            y: 2.0,
+            angle: 0.0,
+            strength: 9.0,
+        }];
+        let mut budget = EdgeletBudget::new(10);
+        let mut records: Vec<Vec<Edgelet>> = Vec::new();
+        for n in 1..=1000usize {
+            // The pipeline computes edgelets only for the records the budget keeps.
+            let list = if budget.keeps(records.len()) {
+                one.clone()
+            } else {
+                Vec::new()
+            };
+            records.push(list);
+            budget.pushed(&mut records, |r| r);
+            let holding: Vec<usize> = (0..n).filter(|&i| !records[i].is_empty()).collect();
+            assert!(holding.len() <= 10, "{n}: {}", holding.len());
+            // Every stride-th record, from the first: evenly spaced over all pushed so far.
+            assert!(holding.iter().all(|i| i % budget.stride == 0));
+            assert_eq!(holding.len(), n.div_ceil(budget.stride));
+            assert!(holding.len() > 5 || n <= 10, "{n}: only {}", holding.len());
+        }
+        assert_eq!(budget.stride, 128);
+    }
+}

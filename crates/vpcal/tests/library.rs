@@ -1,0 +1,130 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! The library in process: the pipeline, the calibration file and the OpenCV export, without
+//! the binary.
+
+use std::path::Path;
+
+use vpcal::detector::DetectorChoice;
+use vpcal::progress::Silent;
+use vpcal::{calibrate, run_pipeline, CalibrationFile, PipelineConfig};
+use vpcal_formats::bcs::read_system;
+use vpcal_geom::camera::Calibration;
+use vpcal_geom::rotation::{mat_vec, rotation_matrix};
+use vpcal_geom::Point2;
+use vpcal_synth::scene::{render_scene, SceneSpec, WriteOptions};
+use vpcal_synth::world::LayoutKind;
+
+/// A rendered 40-frame 320x240 highway clip (the demo's scene); its folder.
+fn scene(dir: &Path) -> (std::path::PathBuf, Calibration) {
+    let mut spec = SceneSpec::new("lib", LayoutKind::Highway, 3);
+    spec.frames = 40;
+    spec.width = 320;
+    spec.height = 240;
+    let opts = WriteOptions {
+        video: true,
+        frames_dir: false,
+    };
+    render_scene(&spec, dir, opts, &|_| {}).unwrap();
+    let t = read_system(&dir.join("results/lib/system_groundtruth.json")).unwrap();
+    let c = t.calibration;
+    (
+        dir.join("dataset/lib"),
+        Calibration::from_vps(c.vp1, c.vp2, c.pp).unwrap(),
+    )
+}
+
+#[test]
+fn the_pipeline_calibrates_a_synthetic_clip_in_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let (dataset, truth) = scene(dir.path());
+    let mut config = PipelineConfig::default();
+    config.detector.choice = DetectorChoice::File(dataset.join("detections.csv"));
+    config.bootstrap = 0;
+    let out = run_pipeline(&dataset.join("video.mp4"), &config, &Silent).unwrap();
+    assert_eq!(out.stats.frames, 40);
+    assert_eq!(out.records.len() as u64, out.stats.crops);
+    let (cal, agg) = calibrate(&out, &config).unwrap();
+    // The demo test's scene: within the same bounds.
+    let focal_err = cal.focal_px / truth.focal_px - 1.0;
+    assert!(
+        focal_err.abs() < 0.15,
+        "{} vs {}",
+        cal.focal_px,
+        truth.focal_px
+    );
+    // The calibration file is strict JSON and reads back as written.
+    let file = vpcal::output::calibration_file(&out, &config, &cal, &agg);
+    let text = file.to_json_string();
+    assert!(!text.contains("Infinity") && !text.contains("NaN"));
+    let back = CalibrationFile::from_json_str(&text, Path::new("calib.json")).unwrap();
+    assert_eq!(back, file);
+    assert_eq!(back.input.kind.as_deref(), Some("video"));
+    assert_eq!(
+        back.settings["detector"]
+            .as_str()
+            .map(|s| s.starts_with("file")),
+        Some(true)
+    );
+    // A bad setting is refused before any work, naming the flag.
+    let bad = PipelineConfig {
+        batch: 0,
+        ..config.clone()
+    };
+    let e = run_pipeline(&dataset.join("video.mp4"), &bad, &Silent).unwrap_err();
+    assert!(format!("{e:#}").contains("--batch"), "{e:#}");
+}
+
+/// Project road-frame points the way `cv2.projectPoints` does with zero distortion.
+fn project(file: &CalibrationFile, q: [f64; 3]) -> Point2 {
+    let cv = file.opencv.as_ref().unwrap();
+    let c = mat_vec(&rotation_matrix(cv.rvec), q);
+    let c = [c[0] + cv.tvec[0], c[1] + cv.tvec[1], c[2] + cv.tvec[2]];
+    let k = cv.camera_matrix;
+    Point2::new(
+        k[0][0] * c[0] / c[2] + k[0][2],
+        k[1][1] * c[1] / c[2] + k[1][2],
+    )
+}
+
+#[test]
+fn the_opencv_export_projects_road_points_where_measure_finds_them() {
+    // f = 1000 px, pp (640, 360), horizon y = 0.
+    let cal = Calibration::from_vps(
+        Point2::new(840.0, 0.0),
+        Point2::new(-5008.0, 0.0),
+        Point2::new(640.0, 360.0),
+    )
+    .unwrap();
+    let input = vpcal_formats::calib::InputSummary {
+        width: 1280,
+        height: 720,
+        ..Default::default()
+    };
+    let mut file = CalibrationFile::calibrated(input, &cal);
+    file.set_scale(0.35, None).unwrap();
+    let h = file.camera_height_m.unwrap();
+    assert!((h - 0.35 * cal.plane_distance()).abs() < 1e-12);
+    let scale = file.scale_m_per_unit.unwrap();
+    // Road points in metres along and across the road; their pixels' road distance (what
+    // `vpcal measure` prints) is their distance.
+    let points = [[5.0, -2.0], [30.0, 1.5], [12.0, 4.0], [60.0, -3.5]];
+    for a in &points {
+        for b in &points {
+            let (pa, pb) = (
+                project(&file, [a[0], a[1], 0.0]),
+                project(&file, [b[0], b[1], 0.0]),
+            );
+            assert!(cal.sees_road(pa) && cal.sees_road(pb));
+            let measured = cal.road_distance(pa, pb).unwrap() * scale;
+            let truth = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+            assert!(
+                (measured - truth).abs() <= 1e-9 * truth.max(1.0),
+                "{measured} vs {truth}"
+            );
+        }
+    }
+    // The camera centre is h above the road origin.
+    let cv = file.opencv.as_ref().unwrap();
+    let t = cv.tvec;
+    assert!(((t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt() - h).abs() < 1e-9);
+}
