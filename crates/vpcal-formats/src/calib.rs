@@ -151,6 +151,15 @@ pub struct CalibrationFile {
     pub pp: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focal_px: Option<f64>,
+    /// Where the focal length came from: `edgelets`, `network` (the VP2 rays), `prior`
+    /// (assumed: no evidence fixed it), `per_vehicle_median` (the reference method) or
+    /// `given` (`--focal`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focal_source: Option<String>,
+    /// 68 % interval of the focal length, pixels: the bootstrap's for measured focal lengths,
+    /// the plausible range of traffic cameras (15-90° views) for assumed ones.
+    #[serde(default)]
+    pub focal_interval_px: Option<[f64; 2]>,
     /// Intrinsic matrix `[[f, 0, px], [0, f, py], [0, 0, 1]]`.
     #[serde(rename = "K", default, skip_serializing_if = "Option::is_none")]
     pub k: Option<Mat3>,
@@ -195,6 +204,9 @@ pub struct CalibrationFile {
     pub confidence: Option<Confidence>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub summary: Option<String>,
+    /// What a user should know about this calibration (an assumed focal length, ...).
+    #[serde(default)]
+    pub warnings: Vec<String>,
     /// The settings of the run, by flag name.
     #[serde(default)]
     pub settings: serde_json::Map<String, serde_json::Value>,
@@ -218,6 +230,8 @@ impl CalibrationFile {
             input,
             pp: None,
             focal_px: None,
+            focal_source: None,
+            focal_interval_px: None,
             k: None,
             r: None,
             vp1: None,
@@ -234,6 +248,7 @@ impl CalibrationFile {
             evidence: None,
             confidence: None,
             summary: None,
+            warnings: Vec::new(),
             settings: serde_json::Map::new(),
             demo: None,
         }

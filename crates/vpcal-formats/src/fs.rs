@@ -84,3 +84,27 @@ pub fn write_json(path: &Path, value: &Json) -> Result<(), FormatError> {
     text.push('\n');
     write_atomic(path, text.as_bytes())
 }
+
+/// Encode an RGB image as PNG bytes (the one PNG encoder of the workspace).
+///
+/// # Errors
+/// The encoder's error, as a message.
+pub fn encode_png(image: &image::RgbImage) -> Result<Vec<u8>, String> {
+    let mut bytes = Vec::new();
+    image
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| format!("cannot encode PNG ({e})"))?;
+    Ok(bytes)
+}
+
+/// Write `image` as a PNG file atomically.
+///
+/// # Errors
+/// [`FormatError`] naming the file.
+pub fn write_png(path: &Path, image: &image::RgbImage) -> Result<(), FormatError> {
+    let bytes = encode_png(image).map_err(|m| FormatError::invalid(path, m))?;
+    write_atomic(path, &bytes)
+}

@@ -9,10 +9,37 @@ use std::sync::Once;
 
 use image::{Rgb, RgbImage};
 use plotters::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use crate::fsutil::write_atomic;
-use crate::train::EpochRecord;
+use crate::metrics::VpMetrics;
 use crate::NetError;
+
+/// Metrics of one finished epoch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpochRecord {
+    /// 1-based epoch number.
+    pub epoch: usize,
+    pub lr: f64,
+    /// Optimizer steps taken so far (cumulative).
+    pub steps: u64,
+    pub train_samples: usize,
+    /// Mean training loss (sum of the terms) per crop-weighted batch.
+    pub train_loss: f64,
+    /// Mean of each loss term (one per stack for the heatmap model).
+    pub train_loss_terms: Vec<f64>,
+    /// Loss of the first and of the last batch of the epoch.
+    pub first_batch_loss: f64,
+    pub last_batch_loss: f64,
+    /// Validation loss (sum of the terms), when the source has a validation split.
+    pub val_loss: Option<f64>,
+    /// Validation VP errors.
+    pub val: Option<VpMetrics>,
+    /// Wall time of training plus validation, seconds.
+    pub seconds: f64,
+    /// Training throughput, crops per second.
+    pub samples_per_s: f64,
+}
 
 static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 static REGISTER: Once = Once::new();
@@ -112,13 +139,7 @@ pub fn write_metrics(out: &Path, history: &[EpochRecord]) -> Result<(), NetError
 /// # Errors
 /// [`NetError::Format`] from the encoder.
 pub fn encode_png(img: &RgbImage) -> Result<Vec<u8>, NetError> {
-    let mut bytes = Vec::new();
-    img.write_to(
-        &mut std::io::Cursor::new(&mut bytes),
-        image::ImageFormat::Png,
-    )
-    .map_err(|e| NetError::Format(format!("PNG encoding: {e}")))?;
-    Ok(bytes)
+    vpcal_formats::fs::encode_png(img).map_err(NetError::Format)
 }
 
 type Series = (String, RGBColor, Vec<(f64, f64)>);

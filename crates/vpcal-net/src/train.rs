@@ -195,31 +195,7 @@ pub struct DataSegment {
     pub data: String,
 }
 
-/// Metrics of one finished epoch.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct EpochRecord {
-    /// 1-based epoch number.
-    pub epoch: usize,
-    pub lr: f64,
-    /// Optimizer steps taken so far (cumulative).
-    pub steps: u64,
-    pub train_samples: usize,
-    /// Mean training loss (sum of the terms) per crop-weighted batch.
-    pub train_loss: f64,
-    /// Mean of each loss term (one per stack for the heatmap model).
-    pub train_loss_terms: Vec<f64>,
-    /// Loss of the first and of the last batch of the epoch.
-    pub first_batch_loss: f64,
-    pub last_batch_loss: f64,
-    /// Validation loss (sum of the terms), when the source has a validation split.
-    pub val_loss: Option<f64>,
-    /// Validation VP errors.
-    pub val: Option<VpMetrics>,
-    /// Wall time of training plus validation, seconds.
-    pub seconds: f64,
-    /// Training throughput, crops per second.
-    pub samples_per_s: f64,
-}
+pub use crate::report::EpochRecord;
 
 /// The trainer's resumable state, saved in every checkpoint as `state.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]

@@ -14,13 +14,13 @@ use rand::Rng;
 use vpcal_data::{Sample, SampleId, Split};
 
 use crate::camera::Camera;
-use crate::math::{rng_for, RngExt, V3};
+use crate::math::{hull, rng_for, RngExt, V3};
 use crate::mesh::Pose;
 use crate::post::{self, Effects};
 use crate::raster::{Backdrop, Target};
 use crate::realbg::RealBackground;
 use crate::shade::Lighting;
-use crate::vehicle::{VehicleKind, VehicleModel, VehicleSpec};
+use crate::vehicle::{project_box, VehicleKind, VehicleModel, VehicleSpec};
 use crate::world::{generate_world, LayoutKind, World, WorldParams};
 use crate::SynthError;
 
@@ -376,7 +376,7 @@ impl CropGenerator {
                     clutter: rng.uni(0.0, 1.0),
                 };
                 let mut world = generate_world(&mut rng, params);
-                crate::scene::clear_view(&mut world, &cam);
+                crate::view::clear_view(&mut world, &cam);
                 let mut light = Lighting::random(&mut rng);
                 light.exposure = rng.uni(0.75, 1.2) as f32 / light.ground_irradiance(0.0)[1];
                 (cam, SetupBackdrop::World(Box::new(world)), light)
@@ -688,29 +688,6 @@ struct Rendered {
     vp1: [f64; 2],
     vp2: [f64; 2],
     visible: f64,
-}
-
-/// Project the 8 box corners; `None` when any is closer than 1 m to the camera plane.
-pub fn project_box(cam: &Camera, spec: &VehicleSpec, pose: &Pose) -> Option<[[f64; 2]; 8]> {
-    let w = spec.bb3d_world(pose);
-    let mut out = [[0.0; 2]; 8];
-    for (o, p) in out.iter_mut().zip(w) {
-        let c = cam.to_camera(p);
-        if c.z < 1.0 {
-            return None;
-        }
-        *o = cam.project_cam(c)?;
-    }
-    Some(out)
-}
-
-/// Axis-aligned hull (x0, y0, x1, y1) of points.
-pub fn hull(p: &[[f64; 2]]) -> (f64, f64, f64, f64) {
-    let mut h = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-    for q in p {
-        h = (h.0.min(q[0]), h.1.min(q[1]), h.2.max(q[0]), h.3.max(q[1]));
-    }
-    h
 }
 
 /// True when two vehicle footprints (with 0.4 m clearance) intersect (separating axis test).

@@ -92,7 +92,7 @@ pub fn write_crops(
 /// The JSON record of a crop.
 pub fn record_of(c: &CropSample) -> SampleRecord {
     let s = &c.sample;
-    let h = crate::crops::hull(&s.bb3d);
+    let h = crate::math::hull(&s.bb3d);
     SampleRecord {
         vehicle: s.id.vehicle,
         instance: s.id.instance,

@@ -62,7 +62,9 @@ pub mod realbg;
 pub mod scene;
 pub mod shade;
 pub mod sheet;
+pub mod truth;
 pub mod vehicle;
+pub mod view;
 pub mod world;
 
 pub use crops::{CropConfig, CropGenerator, CropSample, SynthCropSource};

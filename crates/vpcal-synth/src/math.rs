@@ -215,3 +215,12 @@ pub fn fbm(x: f64, y: f64, base_freq: f64, octaves: u32, min_feature: f64, seed:
     }
     sum
 }
+
+/// Axis-aligned hull (x0, y0, x1, y1) of points.
+pub fn hull(p: &[[f64; 2]]) -> (f64, f64, f64, f64) {
+    let mut h = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for q in p {
+        h = (h.0.min(q[0]), h.1.min(q[1]), h.2.max(q[0]), h.3.max(q[1]));
+    }
+    h
+}

@@ -28,13 +28,13 @@ use rand::Rng;
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::crops::{hull, project_box};
 use crate::error::write_atomic;
-use crate::math::{rng_for, RngExt, V3};
+use crate::math::{hull, rng_for, RngExt, V3};
 use crate::mesh::{Mesh, Pose};
 use crate::raster::{Backdrop, Target, NEAR_M};
 use crate::shade::Lighting;
-use crate::vehicle::{VehicleKind, VehicleModel, VehicleSpec};
+use crate::vehicle::{project_box, VehicleKind, VehicleModel, VehicleSpec};
+use crate::view::clear_view;
 use crate::world::{generate_world, Ground, LayoutKind, World, WorldParams};
 use crate::SynthError;
 
@@ -300,28 +300,7 @@ pub struct SceneState {
     rng: rand_chacha::ChaCha8Rng,
 }
 
-/// Ground truth of one vehicle in one frame.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct VehicleTruth {
-    pub frame: u32,
-    pub id: u32,
-    pub kind: VehicleKind,
-    /// Hull of the projected 3D box (image pixels, may extend outside the image).
-    #[serde(rename = "box")]
-    pub box2d: [f64; 4],
-    /// The hull clipped to the image.
-    pub box_clipped: [f64; 4],
-    pub bb3d: [[f64; 2]; 8],
-    /// VPs in image pixels; `None` (null) when at infinity.
-    pub vp1: Option<[f64; 2]>,
-    pub vp2: Option<[f64; 2]>,
-    pub pose: Pose,
-    pub dims_m: [f64; 3],
-    pub speed_mps: f64,
-    pub parked: bool,
-    /// Fraction of the vehicle's own silhouette that is visible (not occluded, inside the image).
-    pub visible_fraction: f64,
-}
+pub use crate::truth::VehicleTruth;
 
 impl SceneState {
     /// Build the scene from its spec (deterministic) and run the traffic warm-up.
@@ -574,45 +553,6 @@ impl SceneState {
             self.camera.vp_of_heading(h + FRAC_PI_2)?,
         ))
     }
-}
-
-/// Remove props that stand next to the camera or would fill a large part of the view.
-pub fn clear_view(world: &mut World, cam: &Camera) {
-    let area = f64::from(cam.width) * f64::from(cam.height);
-    world.props.retain(|p| {
-        let c = (p.lo + p.hi) * 0.5;
-        let dxy = ((c.x - cam.position.x).powi(2) + (c.y - cam.position.y).powi(2)).sqrt();
-        let radius = ((p.hi.x - p.lo.x).powi(2) + (p.hi.y - p.lo.y).powi(2)).sqrt() / 2.0;
-        if dxy < radius + 6.0 && p.hi.z > cam.position.z - 3.0 {
-            return false;
-        }
-        let mut pts = Vec::new();
-        for x in [p.lo.x, p.hi.x] {
-            for y in [p.lo.y, p.hi.y] {
-                for z in [p.lo.z, p.hi.z] {
-                    let q = cam.to_camera(V3::new(x, y, z));
-                    if q.z < NEAR_M {
-                        // Partly behind the camera: keep only if small and low.
-                        if dxy < 40.0 {
-                            return false;
-                        }
-                        continue;
-                    }
-                    if let Some(r) = cam.project_cam(q) {
-                        pts.push(r);
-                    }
-                }
-            }
-        }
-        if pts.is_empty() {
-            return true;
-        }
-        let (x0, y0, x1, y1) = hull(&pts);
-        let cw = (x1.min(f64::from(cam.width)) - x0.max(0.0)).max(0.0);
-        let ch = (y1.min(f64::from(cam.height)) - y0.max(0.0)).max(0.0);
-        // A thin pole may cross the frame; anything wide and tall in the view goes.
-        cw * ch < 0.12 * area || cw < 0.04 * f64::from(cam.width)
-    });
 }
 
 /// The static part of the picture (road, props, their shadows), in horizontal bands.
@@ -1074,11 +1014,11 @@ fn json_bytes<T: serde::Serialize>(v: &T, path: &Path) -> Result<Vec<u8>, SynthE
 }
 
 fn save_png(img: &image::RgbImage, path: &Path) -> Result<(), SynthError> {
-    vpcal_formats::fs::replace_with(path, |tmp| {
-        img.save_with_format(tmp, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
-    })
-    .map_err(|e| SynthError::io(path, e))
+    let bytes = vpcal_formats::fs::encode_png(img).map_err(|message| SynthError::Format {
+        path: path.to_path_buf(),
+        message,
+    })?;
+    write_atomic(path, &bytes)
 }
 
 /// An ffmpeg subprocess encoding raw RGB frames to H.264.

@@ -1110,6 +1110,24 @@ fn face_normal(q: &[V3; 4], inside: V3) -> V3 {
     }
 }
 
+/// Project the 8 box corners; `None` when any is closer than 1 m to the camera plane.
+pub fn project_box(
+    cam: &crate::camera::Camera,
+    spec: &VehicleSpec,
+    pose: &Pose,
+) -> Option<[[f64; 2]; 8]> {
+    let w = spec.bb3d_world(pose);
+    let mut out = [[0.0; 2]; 8];
+    for (o, p) in out.iter_mut().zip(w) {
+        let c = cam.to_camera(p);
+        if c.z < 1.0 {
+            return None;
+        }
+        *o = cam.project_cam(c)?;
+    }
+    Some(out)
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]

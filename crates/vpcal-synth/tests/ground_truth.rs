@@ -353,7 +353,7 @@ fn crop_vps_are_where_the_box_edges_meet_and_give_the_camera_focal() {
             c.meta.focal_px
         );
         // The box is inside the crop, with some context around it.
-        let (x0, y0, x1, y1) = vpcal_synth::crops::hull(&s.bb3d);
+        let (x0, y0, x1, y1) = vpcal_synth::math::hull(&s.bb3d);
         assert!(
             x0 >= -1e-9
                 && y0 >= -1e-9

@@ -52,6 +52,52 @@ impl std::str::FromStr for Method {
     }
 }
 
+/// Where a calibration's focal length came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FocalSource {
+    /// The edgelets across the vehicles placed VP2 (the robust method).
+    Edgelets,
+    /// The network's VP2 rays and points agreed (the robust method trusted them).
+    Network,
+    /// No evidence fixed it: the robust method's focal prior decided.
+    Prior,
+    /// The median of the per-vehicle focal lengths (the reference method).
+    PerVehicle,
+    /// Given by the user (`--focal`).
+    Given,
+}
+
+impl FocalSource {
+    pub fn name(self) -> &'static str {
+        match self {
+            FocalSource::Edgelets => "edgelets",
+            FocalSource::Network => "network",
+            FocalSource::Prior => "prior",
+            FocalSource::PerVehicle => "per_vehicle_median",
+            FocalSource::Given => "given",
+        }
+    }
+
+    /// Whether the focal length was assumed rather than measured.
+    pub fn is_assumed(self) -> bool {
+        self == FocalSource::Prior
+    }
+}
+
+/// Horizontal fields of view of traffic cameras, degrees: from a telephoto view far along a
+/// motorway (15°) to a wide-angle view of a junction (90°).
+pub const TRAFFIC_FOV_DEG: [f64; 2] = [15.0, 90.0];
+
+/// The 68 % interval of a focal length nobody measured, for frames `width` pixels wide: the
+/// central 68 % (16th to 84th percentile) of a distribution uniform in `ln f` over the focal
+/// lengths of [`TRAFFIC_FOV_DEG`] (`f = (W / 2) / tan(fov / 2)`).
+pub fn assumed_focal_interval(width: u32) -> [f64; 2] {
+    let w = f64::from(width);
+    let f_of = |fov_deg: f64| w / 2.0 / (fov_deg.to_radians() / 2.0).tan();
+    let (lo, hi) = (f_of(TRAFFIC_FOV_DEG[1]).ln(), f_of(TRAFFIC_FOV_DEG[0]).ln());
+    [(lo + 0.16 * (hi - lo)).exp(), (lo + 0.84 * (hi - lo)).exp()]
+}
+
 /// The outcome of one aggregation: the two VPs and what to tell the user.
 #[derive(Debug, Clone)]
 pub struct Aggregated {
@@ -65,6 +111,43 @@ pub struct Aggregated {
     pub confidence: Option<Confidence>,
     /// The straight vehicle tracks the robust method found (empty for the other methods).
     pub track_lines: Vec<TrackLine>,
+    /// Where the focal length came from.
+    pub focal_source: FocalSource,
+    /// The 68 % interval of the focal length, pixels: the bootstrap's when evidence gave it,
+    /// [`assumed_focal_interval`] when it was assumed; `None` without either.
+    pub focal_interval_px: Option<[f64; 2]>,
+    /// What the user should know about this calibration (an assumed focal length, ...).
+    pub warnings: Vec<String>,
+}
+
+impl Aggregated {
+    /// The same aggregation with a known focal length: VP1 and the horizon stay, VP2 moves
+    /// along the horizon to the point orthogonal to VP1 for `focal_px`.
+    ///
+    /// # Errors
+    /// When `focal_px` is not a positive number or the horizon has no such point.
+    pub fn with_focal(mut self, focal_px: f64, pp: Point2) -> Result<Aggregated, String> {
+        if !(focal_px.is_finite() && focal_px > 0.0) {
+            return Err(format!(
+                "--focal {focal_px}: expected a positive number of pixels"
+            ));
+        }
+        let horizon = vpcal_geom::Line::through(self.vp1, self.vp2)
+            .ok_or("the aggregated VPs give no horizon")?;
+        let vp2 = vpcal_geom::camera::orthogonal_vp_on_line(self.vp1, horizon, focal_px, pp)
+            .ok_or("the horizon has no point orthogonal to VP1 for this focal length")?;
+        self.summary.push_str(&format!(
+            "; focal length given: {focal_px:.0} px (the evidence gave {:.0} px)",
+            self.focal_px
+        ));
+        self.vp2 = vp2;
+        self.focal_px = focal_px;
+        self.focal_source = FocalSource::Given;
+        self.focal_interval_px = Some([focal_px, focal_px]);
+        self.warnings
+            .retain(|w| !w.contains("focal length is assumed"));
+        Ok(self)
+    }
 }
 
 /// The items' edgelets, one list per item; empty when no item has any (files of other tools).
@@ -130,6 +213,9 @@ pub fn aggregate(
                 }),
                 confidence: None,
                 track_lines: Vec::new(),
+                focal_source: FocalSource::PerVehicle,
+                focal_interval_px: None,
+                warnings: Vec::new(),
             })
         }
         Method::Robust | Method::RobustNetwork => {
@@ -195,10 +281,45 @@ pub fn aggregate(
                     }
                 }
             );
-            if let Some(c) = &r.confidence {
+            let focal_source = if e.focal_from_edgelets {
+                FocalSource::Edgelets
+            } else if e.rays_trusted {
+                FocalSource::Network
+            } else {
+                FocalSource::Prior
+            };
+            let mut warnings = Vec::new();
+            let focal_interval_px = if focal_source.is_assumed() {
+                let [lo, hi] = assumed_focal_interval(image_size.0);
                 summary.push_str(&format!(
-                    "; focal 68% interval {:.0}-{:.0} px (VP2 rays alone: {:.0} px), horizon ±{:.2}°",
-                    c.focal_px_p16, c.focal_px_p84, c.focal_px_data_only, c.horizon_angle_sd_deg
+                    "; focal length ASSUMED ({:.0} px, the prior: no evidence fixed it; a \
+                     {}-{}° view gives {lo:.0}-{hi:.0} px as its 68% interval)",
+                    r.calibration.focal_px, TRAFFIC_FOV_DEG[0], TRAFFIC_FOV_DEG[1]
+                ));
+                warnings.push(format!(
+                    "the focal length is assumed, not measured ({:.0} px from the prior; \
+                     plausible {lo:.0}-{hi:.0} px): distances and speeds carry its error; give \
+                     the camera's focal length with --focal PX if it is known",
+                    r.calibration.focal_px
+                ));
+                Some([lo, hi])
+            } else {
+                r.confidence
+                    .as_ref()
+                    .map(|c| [c.focal_px_p16, c.focal_px_p84])
+            };
+            if let Some(c) = &r.confidence {
+                if !focal_source.is_assumed() {
+                    summary.push_str(&format!(
+                        "; focal 68% interval {:.0}-{:.0} px from {}",
+                        c.focal_px_p16,
+                        c.focal_px_p84,
+                        focal_source.name()
+                    ));
+                }
+                summary.push_str(&format!(
+                    " (VP2 rays alone: {:.0} px), horizon ±{:.2}°",
+                    c.focal_px_data_only, c.horizon_angle_sd_deg
                 ));
             }
             let evidence = serde_json::json!({
@@ -247,6 +368,9 @@ pub fn aggregate(
                 evidence,
                 confidence,
                 track_lines: r.track_lines,
+                focal_source,
+                focal_interval_px,
+                warnings,
             })
         }
     }

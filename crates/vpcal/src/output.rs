@@ -71,6 +71,7 @@ pub fn settings(out: &PipelineOutput, c: &PipelineConfig) -> Map<String, Value> 
         "replay": c.replay,
         "bootstrap": c.bootstrap,
         "pp": c.pp.to_json(),
+        "focal": c.focal_px,
     });
     match v {
         Value::Object(m) => m,
@@ -89,8 +90,16 @@ pub fn calibration_file(
     file.evidence = Some(agg.evidence.clone());
     file.confidence = agg.confidence.clone();
     file.summary = Some(agg.summary.clone());
+    set_focal_evidence(&mut file, agg);
     file.settings = settings(out, config);
     file
+}
+
+/// The focal length's source, interval and the aggregation's warnings, into `file`.
+pub fn set_focal_evidence(file: &mut CalibrationFile, agg: &Aggregated) {
+    file.focal_source = Some(agg.focal_source.name().to_string());
+    file.focal_interval_px = agg.focal_interval_px;
+    file.warnings = agg.warnings.clone();
 }
 
 /// The calibration file of a run that found no camera, for `reason`.

@@ -10,7 +10,7 @@ use image::{Rgb, RgbImage};
 use vpcal_geom::aggregate::tracks::TrackLine;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::Point2;
-use vpcal_synth::sheet::draw_line;
+use vpcal_video::draw::{draw_line, draw_ring};
 
 use crate::pipeline::VehicleRecord;
 
@@ -211,7 +211,7 @@ pub fn draw(
         );
     }
     for (vp, col) in [(cal.vp1, RED), (cal.vp2, GREEN)] {
-        vpcal_synth::sheet::draw_ring(&mut img, [vp.x, vp.y], 6.0 * w, col);
+        draw_ring(&mut img, [vp.x, vp.y], 6.0 * w, col);
     }
     img
 }

@@ -124,6 +124,9 @@ pub struct PipelineConfig {
     /// Bootstrap resamples of the robust method (0: none).
     pub bootstrap: usize,
     pub pp: PrincipalPoint,
+    /// A known focal length, pixels (from the camera's data sheet): VP1 and the horizon
+    /// still come from the footage.
+    pub focal_px: Option<f64>,
 }
 
 impl Default for PipelineConfig {
@@ -143,6 +146,7 @@ impl Default for PipelineConfig {
             method: Method::Robust,
             bootstrap: 30,
             pp: PrincipalPoint::Centre,
+            focal_px: None,
         }
     }
 }
@@ -158,6 +162,11 @@ impl PipelineConfig {
         }
         if !self.min_score.is_finite() {
             bail!("--min-score must be a number");
+        }
+        if let Some(f) = self.focal_px {
+            if !(f.is_finite() && f > 0.0) {
+                bail!("--focal {f}: expected a positive number of pixels");
+            }
         }
         self.frames
             .validate()
@@ -626,6 +635,10 @@ pub fn calibrate(
         config.min_score,
         config.bootstrap,
     )?;
+    let agg = match config.focal_px {
+        Some(f) => agg.with_focal(f, pp).map_err(anyhow::Error::msg)?,
+        None => agg,
+    };
     let cal = Calibration::from_vps(agg.vp1, agg.vp2, pp)
         .map_err(|e| anyhow::anyhow!("the aggregated vanishing points give no camera: {e}"))?;
     Ok((cal, agg))

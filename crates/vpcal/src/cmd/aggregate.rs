@@ -44,6 +44,10 @@ pub struct Args {
     /// Bootstrap resamples for the robust method's confidence (0 to skip).
     #[arg(long, default_value_t = 30)]
     pub bootstrap: usize,
+    /// The camera's focal length in pixels, when known: VP1 and the horizon still come from
+    /// the records.
+    #[arg(long, value_name = "PX")]
+    pub focal: Option<f64>,
 }
 
 pub fn run(args: Args) -> Result<Exit> {
@@ -86,6 +90,7 @@ pub fn run(args: Args) -> Result<Exit> {
         "bootstrap": args.bootstrap,
         "pp": args.pp.to_json(),
         "image_size": [width, height],
+        "focal": args.focal,
     });
     let result = aggregate(
         &vehicles,
@@ -97,6 +102,10 @@ pub fn run(args: Args) -> Result<Exit> {
         args.bootstrap,
     )
     .with_context(|| format!("aggregating {}", args.vpout.display()))
+    .and_then(|agg| match args.focal {
+        Some(f) => agg.with_focal(f, pp).map_err(anyhow::Error::msg),
+        None => Ok(agg),
+    })
     .and_then(|agg| {
         let cal = Calibration::from_vps(agg.vp1, agg.vp2, pp)
             .map_err(|e| anyhow::anyhow!("the aggregated vanishing points give no camera: {e}"))?;
@@ -108,7 +117,11 @@ pub fn run(args: Args) -> Result<Exit> {
             file.evidence = Some(agg.evidence.clone());
             file.confidence = agg.confidence.clone();
             file.summary = Some(agg.summary.clone());
+            vpcal::output::set_focal_evidence(&mut file, agg);
             eprintln!("{}", agg.summary);
+            for w in &agg.warnings {
+                eprintln!("warning: {w}");
+            }
             eprintln!(
                 "f = {:.1} px, vp1 = ({:.2}, {:.2}), vp2 = ({:.2}, {:.2}), {width}x{height} frames",
                 cal.focal_px, cal.vp1.x, cal.vp1.y, cal.vp2.x, cal.vp2.y

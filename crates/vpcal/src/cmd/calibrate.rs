@@ -95,6 +95,11 @@ pub struct PipelineArgs {
     /// x,y in pixels.
     #[arg(long, default_value = "centre", value_name = "PP")]
     pub pp: PrincipalPoint,
+    /// The camera's focal length in pixels, when known (e.g. lens focal length / pixel pitch
+    /// from its data sheet): VP1 and the horizon still come from the footage. Without it the
+    /// focal length is measured when the evidence allows, else assumed (and said so).
+    #[arg(long, value_name = "PX")]
+    pub focal: Option<f64>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -220,6 +225,7 @@ impl PipelineArgs {
             method: self.method,
             bootstrap: self.bootstrap,
             pp: self.pp,
+            focal_px: self.focal,
         };
         config.validate()?;
         Ok(config)
@@ -272,7 +278,21 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
     match result {
         Ok((cal, agg)) => {
             row("aggregation", agg.summary.clone());
-            row("focal length", format!("{:.1} px", cal.focal_px));
+            row(
+                "focal length",
+                format!(
+                    "{:.1} px ({}{})",
+                    cal.focal_px,
+                    agg.focal_source.name(),
+                    match agg.focal_interval_px {
+                        Some([lo, hi]) if agg.focal_source.is_assumed() => {
+                            format!(": ASSUMED, plausible {lo:.0}-{hi:.0} px")
+                        }
+                        Some([lo, hi]) if lo < hi => format!(", 68% interval {lo:.0}-{hi:.0} px"),
+                        _ => String::new(),
+                    }
+                ),
+            );
             row(
                 "vp1, vp2",
                 format!(
@@ -290,6 +310,11 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
             );
         }
         Err(e) => row("result", format!("NOT CALIBRATED: {e:#}")),
+    }
+    if let Ok((_, agg)) = result {
+        for w in &agg.warnings {
+            eprintln!("warning: {w}");
+        }
     }
 }
 
