@@ -106,6 +106,37 @@ pub struct OpenCvCamera {
     pub image_size: [u32; 2],
 }
 
+impl OpenCvCamera {
+    /// The camera as an OpenCV FileStorage YAML document (`cv2.FileStorage(path,
+    /// cv2.FILE_STORAGE_READ)`): `image_width`, `image_height`, `camera_matrix`,
+    /// `distortion_coefficients`, `rvec`, `tvec` (matrices of doubles), `units`, and
+    /// `camera_height_m` when known.
+    pub fn to_filestorage_yaml(&self, camera_height_m: Option<f64>) -> String {
+        fn matrix(name: &str, rows: usize, cols: usize, data: &[f64]) -> String {
+            let values: Vec<String> = data.iter().map(|v| format!("{v:?}")).collect();
+            format!(
+                "{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {} ]\n",
+                values.join(", ")
+            )
+        }
+        let k: Vec<f64> = self.camera_matrix.iter().flatten().copied().collect();
+        let mut out = String::from("%YAML:1.0\n---\n");
+        out.push_str(&format!(
+            "image_width: {}\nimage_height: {}\n",
+            self.image_size[0], self.image_size[1]
+        ));
+        out.push_str(&matrix("camera_matrix", 3, 3, &k));
+        out.push_str(&matrix("distortion_coefficients", 1, 5, &self.dist_coeffs));
+        out.push_str(&matrix("rvec", 3, 1, &self.rvec));
+        out.push_str(&matrix("tvec", 3, 1, &self.tvec));
+        out.push_str(&format!("units: \"{}\"\n", self.units));
+        if let Some(h) = camera_height_m.filter(|h| h.is_finite()) {
+            out.push_str(&format!("camera_height_m: {h:?}\n"));
+        }
+        out
+    }
+}
+
 /// The demo's comparison with the synthetic scene's true camera.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DemoComparison {
@@ -315,6 +346,17 @@ impl CalibrationFile {
         let cal = self.camera()?;
         self.scale_m_per_unit = Some(scale_m_per_unit);
         self.scale_reference = reference;
+        self.update_export(&cal);
+        Ok(())
+    }
+
+    /// Recompute the OpenCV block and the camera height from the camera and the scale (for
+    /// version 1 files, which have neither).
+    ///
+    /// # Errors
+    /// When the file has no camera.
+    pub fn refresh_export(&mut self) -> Result<(), String> {
+        let cal = self.camera()?;
         self.update_export(&cal);
         Ok(())
     }

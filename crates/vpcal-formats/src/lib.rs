@@ -3,7 +3,8 @@
 //!
 //! - [`calib`]: vpcal's calibration file (`calib.json`), typed and versioned.
 //! - [`json`]: JSON with Python's `Infinity`/`NaN` tokens (read; vpcal writes strict JSON).
-//! - [`pickle`]: a safe Python-pickle reader (no code execution; numpy arrays and scalars).
+//! - [`pickle`]: a safe Python-pickle reader (no code execution; numpy arrays and scalars): the
+//!   values, the stack machine, the node-graph converter, the decoders and the accessors.
 //! - [`bcs`]: BrnoCompSpeed ground truth (`gt_data.pkl` / `gt_data.json`) and system files.
 //! - [`bcp`]: BrnoCarPark ground truth (`gt_pairs.json`).
 //! - [`reference`]: the reference implementation's `VPout_*.json` and `detections.json`.

@@ -1188,6 +1188,8 @@ pub fn render_scene(
         "yaw_deg": yaw.to_degrees(),
         "pitch_deg": pitch.to_degrees(),
         "roll_deg": roll.to_degrees(),
+        "roll_convention": "the camera's rotation about its optical axis; the horizon's angle in the image (calib.json's roll_deg and horizon.angle_deg) is horizon_angle_deg",
+        "horizon_angle_deg": vpcal_geom::Line(cam.horizon()).angle().to_degrees(),
         "main_heading_deg": st.world.main_heading.to_degrees(),
         "vp1": vp1,
         "vp2": vp2,

@@ -375,3 +375,23 @@ pub fn aggregate(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_assumed_interval_is_the_middle_of_the_traffic_camera_range() {
+        // f of a 90° view is W/2, of a 15° view 3.80 W; the middle 68 % in ln f.
+        let [lo, hi] = assumed_focal_interval(1000);
+        let (f90, f15) = (500.0f64, 500.0 / 7.5f64.to_radians().tan());
+        let ln = |f: f64| f.ln();
+        assert!((ln(lo) - (ln(f90) + 0.16 * (ln(f15) - ln(f90)))).abs() < 1e-12);
+        assert!((ln(hi) - (ln(f90) + 0.84 * (ln(f15) - ln(f90)))).abs() < 1e-12);
+        // Python: exp(ln 500 + q ln(3797.88 / 500)) for q = 0.16, 0.84 -> 691.61, 2745.68.
+        assert!(
+            (lo - 691.61).abs() < 0.01 && (hi - 2745.68).abs() < 0.01,
+            "{lo} {hi}"
+        );
+    }
+}

@@ -31,6 +31,8 @@ enum Command {
     Scale(cmd::measure::ScaleArgs),
     /// Measure distances on the road with a calibration.
     Measure(cmd::measure::MeasureArgs),
+    /// Export a calibration for other tools (OpenCV FileStorage YAML).
+    Export(cmd::measure::ExportArgs),
     /// Turn per-vehicle VP pairs (a VPout JSON file) into a camera calibration.
     Aggregate(cmd::aggregate::Args),
     /// Training data: preview the augmentation, benchmark the batch pipeline.
@@ -60,6 +62,7 @@ fn main() -> std::process::ExitCode {
         Command::Detect(args) => cmd::detect::run(args),
         Command::Scale(args) => cmd::measure::run_scale(args),
         Command::Measure(args) => cmd::measure::run_measure(args),
+        Command::Export(args) => cmd::measure::run_export(args),
         Command::Data(args) => cmd::data::run(args),
         Command::Eval(args) => cmd::eval::run(args),
         Command::Synth(args) => cmd::synth::run(args),

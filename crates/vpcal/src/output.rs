@@ -128,6 +128,19 @@ pub fn write_bcs_system(path: &Path, cal: &Calibration, scale: Option<f64>) -> R
     Ok(())
 }
 
+/// Write the OpenCV block of a calibrated `file` as an OpenCV FileStorage YAML file.
+///
+/// # Errors
+/// The file has no camera, or cannot be written.
+pub fn write_opencv_yaml(path: &Path, file: &CalibrationFile) -> Result<()> {
+    let Some(cv) = &file.opencv else {
+        bail!("the calibration has no camera to export");
+    };
+    let yaml = cv.to_filestorage_yaml(file.camera_height_m);
+    vpcal_formats::fs::write_atomic(path, yaml.as_bytes())?;
+    Ok(())
+}
+
 /// Write the per-vehicle records of a run (deep_vp's `VPout` layout, strict JSON).
 ///
 /// # Errors

@@ -414,6 +414,24 @@ fn scale_then_measure_gives_metres_on_the_road() {
     }
     // A point above the horizon does not see the road.
     assert!(v[2]["distance"].is_null());
+    // The scaled camera for OpenCV: metres, and the camera's height.
+    let yml = dir.path().join("camera.yml");
+    let r = vpcal(&["export", c, "--opencv", yml.to_str().unwrap()]);
+    assert!(r.status.success(), "{}", text(&r));
+    let yaml = std::fs::read_to_string(&yml).unwrap();
+    assert!(yaml.starts_with("%YAML:1.0\n---\n"), "{yaml}");
+    for key in [
+        "camera_matrix: !!opencv-matrix",
+        "rvec:",
+        "tvec:",
+        "units: \"m\"",
+        "camera_height_m:",
+    ] {
+        assert!(yaml.contains(key), "{key}: {yaml}");
+    }
+    let scaled = read_calibration(&calib);
+    assert!(scaled.camera_height_m.unwrap() > 0.0);
+    assert_eq!(scaled.opencv.unwrap().units, "m");
 
     // Scaling from a pixel above the horizon is refused and leaves the file as it was.
     let before = std::fs::read(&calib).unwrap();

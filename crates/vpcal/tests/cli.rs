@@ -259,6 +259,54 @@ fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
         }
     }
     assert_eq!(ours["camera_calibration"]["scale"], 1.0);
+    // The reference method's focal length is the median of the vehicles'; a given one stays.
+    assert_eq!(calib.focal_source.as_deref(), Some("per_vehicle_median"));
+    let given = tmp.path().join("given.json");
+    let out = vpcal(&[
+        "aggregate",
+        vpout.to_str().unwrap(),
+        "--pp",
+        "bcs",
+        "--bootstrap",
+        "0",
+        "--focal",
+        "2500",
+        "-o",
+        given.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let given = read_calibration(&given);
+    assert!((given.focal_px.unwrap() - 2500.0).abs() < 1e-6);
+    assert_eq!(given.focal_source.as_deref(), Some("given"));
+    assert_eq!(given.focal_interval_px, Some([2500.0, 2500.0]));
+    assert!(given.warnings.is_empty(), "{:?}", given.warnings);
+    // The robust method finds no evidence for the focal length in these records (no edgelets,
+    // VP2 rays it does not trust): it says the focal length is assumed, with the plausible
+    // range as its interval.
+    let robust = tmp.path().join("robust.json");
+    let out = vpcal(&[
+        "aggregate",
+        vpout.to_str().unwrap(),
+        "--pp",
+        "bcs",
+        "--bootstrap",
+        "0",
+        "-o",
+        robust.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("focal length is assumed"),
+        "{}",
+        stderr(&out)
+    );
+    let robust = read_calibration(&robust);
+    assert_eq!(robust.focal_source.as_deref(), Some("prior"));
+    assert_eq!(
+        robust.focal_interval_px,
+        Some(vpcal::aggregate::assumed_focal_interval(1920))
+    );
+    assert!(robust.summary.unwrap().contains("ASSUMED"));
 }
 
 #[test]

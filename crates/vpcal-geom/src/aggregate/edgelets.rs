@@ -28,6 +28,29 @@ use super::tracks::Tangent;
 use crate::point::Point2;
 use crate::solve::{nelder_mead, percentile, sd, SplitMix};
 
+/// Focal lengths the straight edgelet fit's grid spans, in image widths: 0.25 (a 127° view) to
+/// 20 (a 3° view), beyond the physical range of traffic cameras on both sides, so that the
+/// data, not the grid, bounds the fit.
+pub const STRAIGHT_FOCAL_GRID_WIDTHS: [f64; 2] = [0.25, 20.0];
+
+/// Focal lengths the curved-road fit's grid spans, in image widths: 0.3 (a 118° view) to 10
+/// (a 6° view). Narrower than the straight fit's: this grid has a third axis (the horizon's
+/// height, 40 cells) and its fit is dropped when it ends at an edge ([`CURVED_ROLL_LIMIT_DEG`]),
+/// so the range is the physical one with a margin rather than a search for outliers.
+pub const CURVED_FOCAL_GRID_WIDTHS: [f64; 2] = [0.3, 10.0];
+
+/// A curved-road fit whose roll strays further than this from the straight fit's is dropped:
+/// the grid searches ±6°, and a fit that walks past it has found no consistent camera.
+pub const CURVED_ROLL_LIMIT_DEG: f64 = 8.0;
+
+/// Nelder-Mead budgets: a fit from the grid's best cell, and a bootstrap refit, which starts
+/// at the fit and moves little (both converge well within them on the suite's scenes).
+const FIT_ITERATIONS: usize = 300;
+const REFIT_ITERATIONS: usize = 150;
+/// The three-parameter curved fit and the two-parameter VP1 fit take longer to converge.
+const CURVED_FIT_ITERATIONS: usize = 400;
+const VP1_FIT_ITERATIONS: usize = 400;
+
 /// A short straight piece of an image edge: position (frame pixels), direction of the edge
 /// (radians, a line angle: `a` and `a + π` are the same), and gradient strength.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -278,7 +301,8 @@ pub fn fit(
     }
     let s = opts.scale_deg.to_radians();
     let ones = vec![1.0; flat.groups];
-    let (lo, hi) = ((0.25 * width).ln(), (20.0 * width).ln());
+    let [lo_w, hi_w] = STRAIGHT_FOCAL_GRID_WIDTHS;
+    let (lo, hi) = ((lo_w * width).ln(), (hi_w * width).ln());
     let mut best = (f64::INFINITY, [0.0, 0.0]);
     for i in 0..32 {
         let ln_f = lo + (hi - lo) * f64::from(i) / 31.0;
@@ -291,12 +315,24 @@ pub fn fit(
         }
     }
     let step0 = [0.05, 0.2f64.to_radians()];
-    let x = nelder_mead(|x| cost(&flat, &ones, vp1, pp, x, s), &best.1, &step0, 300).x;
+    let x = nelder_mead(
+        |x| cost(&flat, &ones, vp1, pp, x, s),
+        &best.1,
+        &step0,
+        FIT_ITERATIONS,
+    )
+    .x;
     let mut rng = SplitMix(seed ^ 0xED6E_1E75);
     let (mut fs, mut rolls) = (vec![], vec![]);
     for _ in 0..opts.bootstrap {
         let w: Vec<f64> = (0..flat.groups).map(|_| rng.poisson1()).collect();
-        let xb = nelder_mead(|x| cost(&flat, &w, vp1, pp, x, s), &x, &step0, 150).x;
+        let xb = nelder_mead(
+            |x| cost(&flat, &w, vp1, pp, x, s),
+            &x,
+            &step0,
+            REFIT_ITERATIONS,
+        )
+        .x;
         fs.push(xb[0].exp());
         rolls.push(line_angle_diff(xb[1] - x[1]).to_degrees());
     }
@@ -391,7 +427,7 @@ pub fn fit_vp1(
         .iter()
         .fold(Point2::new(0.0, 0.0), |a, &i| a + point[i] / n);
     let d = 0.02 * (start - mean).norm().max(1.0);
-    let q = nelder_mead(cost, &[start.x, start.y], &[d, d], 400).x;
+    let q = nelder_mead(cost, &[start.x, start.y], &[d, d], VP1_FIT_ITERATIONS).x;
     let vp1 = Point2::new(q[0], q[1]);
     vp1.is_finite().then_some((vp1, picked.len(), used))
 }
@@ -552,7 +588,8 @@ pub fn fit_curved(
     };
     let weight = weights(&full);
     let coarse_weight = weights(&coarse);
-    let (lo, hi) = ((0.3 * width).ln(), (10.0 * width).ln());
+    let [lo_w, hi_w] = CURVED_FOCAL_GRID_WIDTHS;
+    let (lo, hi) = ((lo_w * width).ln(), (hi_w * width).ln());
     let mut best = (f64::INFINITY, [0.0; 3]);
     for i in 0..16 {
         let ln_f = lo + (hi - lo) * f64::from(i) / 15.0;
@@ -569,14 +606,37 @@ pub fn fit_curved(
         }
     }
     let step0 = [0.05, 0.3f64.to_radians(), 0.01 * height];
-    let x = nelder_mead(|x| full.cost(&weight, pp, x, s, ex1), &best.1, &step0, 400).x;
+    let x = nelder_mead(
+        |x| full.cost(&weight, pp, x, s, ex1),
+        &best.1,
+        &step0,
+        CURVED_FIT_ITERATIONS,
+    )
+    .x;
     let mut rng = SplitMix(seed ^ 0xC0C0_1E75);
     let (mut fs, mut rolls) = (vec![], vec![]);
+    // The resamples refit the coarse cost (2000 edgelets), whose optimum is not the full
+    // fit's: they spread around the coarse fit, and are moved onto the full fit by the ratio
+    // of the two (otherwise the interval can miss its own estimate).
+    let centre = nelder_mead(
+        |x| coarse.cost(&coarse_weight, pp, x, s, ex1),
+        &x,
+        &step0,
+        REFIT_ITERATIONS,
+    )
+    .x;
+    let shift = (x[0] - centre[0]).exp();
     for _ in 0..opts.bootstrap.min(10) {
         let w: Vec<f64> = coarse_weight.iter().map(|cw| cw * rng.poisson1()).collect();
-        let xb = nelder_mead(|x| coarse.cost(&w, pp, x, s, ex1), &x, &step0, 150).x;
-        fs.push(xb[0].exp());
-        rolls.push(line_angle_diff(xb[1] - x[1]).to_degrees());
+        let xb = nelder_mead(
+            |x| coarse.cost(&w, pp, x, s, ex1),
+            &centre,
+            &step0,
+            REFIT_ITERATIONS,
+        )
+        .x;
+        fs.push(xb[0].exp() * shift);
+        rolls.push(line_angle_diff(xb[1] - centre[1]).to_degrees());
     }
     // VP1: the median of the vehicles' own VP1s along the horizon.
     let h = Point2::new(x[1].cos(), x[1].sin());
@@ -597,8 +657,8 @@ pub fn fit_curved(
     let vp2 = vp1 + hd / u;
     let (p16, p84, roll_sd_deg) = bootstrap_spread(fs, &rolls);
     // A fit that left the grid's range of focal lengths or rolls found no curve's camera.
-    let inside =
-        (lo..=hi).contains(&x[0]) && line_angle_diff(x[1] - roll0).abs() <= 8f64.to_radians();
+    let inside = (lo..=hi).contains(&x[0])
+        && line_angle_diff(x[1] - roll0).abs() <= CURVED_ROLL_LIMIT_DEG.to_radians();
     (inside && vp1.is_finite() && vp2.is_finite()).then_some(CurvedFit {
         focal_px: x[0].exp(),
         roll: x[1],

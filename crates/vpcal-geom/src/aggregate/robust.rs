@@ -651,7 +651,7 @@ fn fit_vp1(
         |q| vp1_cost([q[0], q[1]], lines_in, w, s),
         &[q0[0], q0[1]],
         &[0.02, 0.02],
-        300,
+        VP1_ITERATIONS,
     )
     .x;
     Some(sphere([q[0], q[1]]))
@@ -727,8 +727,9 @@ impl Vp2Model<'_> {
         let x0 = match start {
             Some(s) => s,
             None => {
-                let lo = (0.15 * self.f0 / self.opts.focal_prior_ratio).max(1.0).ln();
-                let hi = (15.0 * self.f0 / self.opts.focal_prior_ratio).ln();
+                let [lo_w, hi_w] = HORIZON_FOCAL_GRID_WIDTHS;
+                let lo = (lo_w * self.f0 / self.opts.focal_prior_ratio).max(1.0).ln();
+                let hi = (hi_w * self.f0 / self.opts.focal_prior_ratio).ln();
                 let roll_max = if self.roll_prior {
                     (3.0 * self.opts.roll_prior_sigma_deg).min(10.0)
                 } else {
@@ -775,7 +776,7 @@ impl Vp2Model<'_> {
             |x| self.cost(x, w, with_focal_prior),
             &x0,
             &[0.05, 0.2f64.to_radians(), 0.3f64.to_radians()],
-            400,
+            HORIZON_ITERATIONS,
         )
         .x;
         [x[0], x[1], x[2]]
@@ -843,7 +844,7 @@ fn fit_camera(
         joint,
         &[q1[0], q1[1], x_rays[0], x_rays[1]],
         &[0.002, 0.002, 0.02, 0.1f64.to_radians()],
-        600,
+        JOINT_ITERATIONS,
     )
     .x;
     let sp = sphere([p[0], p[1]]);
@@ -866,6 +867,17 @@ fn weight_above_horizon(centres: &[Point2], weights: &[f64], horizon: Line, pp: 
         .map(|(_, w)| w)
         .sum()
 }
+
+/// Nelder-Mead budgets of the fits, by their number of parameters: VP1 on the sphere (2),
+/// the horizon model (ln f, roll, ray bias: 3), and VP1 with the horizon jointly (4).
+const VP1_ITERATIONS: usize = 300;
+const HORIZON_ITERATIONS: usize = 400;
+const JOINT_ITERATIONS: usize = 600;
+
+/// Focal lengths the horizon model's grid spans, in image widths: 0.15 (a 147° view) to 15 (a
+/// 4° view), beyond the physical range of traffic cameras so that the VP2 evidence (or the
+/// prior), not the grid, bounds the fit.
+const HORIZON_FOCAL_GRID_WIDTHS: [f64; 2] = [0.15, 15.0];
 
 /// Fewer VP1 lines than this within the threshold of VP1 is "not enough evidence".
 const MIN_VP1_INLIERS: usize = 5;

@@ -34,6 +34,10 @@ pub struct Args {
     /// Also write a frame with the horizon, vehicle VP directions and a road grid (PNG).
     #[arg(long, value_name = "PNG")]
     pub overlay: Option<PathBuf>,
+    /// Also write the camera as an OpenCV FileStorage YAML file (road units until `vpcal
+    /// scale`; `vpcal export` writes it again from a scaled calibration).
+    #[arg(long, value_name = "YML")]
+    pub opencv: Option<PathBuf>,
     #[command(flatten)]
     pub pipeline: PipelineArgs,
     /// Print the calibration as JSON on stdout (the summary stays on stderr).
@@ -333,6 +337,7 @@ pub fn run(args: Args) -> Result<Exit> {
         ("--bcs-json", &args.bcs_json),
         ("--vehicles", &args.vehicles),
         ("--overlay", &args.overlay),
+        ("--opencv", &args.opencv),
     ] {
         if let Some(path) = path {
             check_destination(flag, path)?;
@@ -357,6 +362,9 @@ pub fn run(args: Args) -> Result<Exit> {
             }
             if let Some(path) = &args.bcs_json {
                 output::write_bcs_system(path, &cal, None)?;
+            }
+            if let Some(path) = &args.opencv {
+                output::write_opencv_yaml(path, &doc)?;
             }
             if let Some(path) = &args.overlay {
                 let Some(picture) = &out.picture else {

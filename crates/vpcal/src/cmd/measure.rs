@@ -178,3 +178,33 @@ pub fn run_measure(a: MeasureArgs) -> Result<()> {
     }
     Ok(())
 }
+
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    /// A calibration written by `vpcal calibrate -o` (with `vpcal scale` for metres).
+    pub calib: PathBuf,
+    /// Write the camera as an OpenCV FileStorage YAML file (camera_matrix,
+    /// distortion_coefficients, rvec, tvec of the road frame, image size).
+    #[arg(long, value_name = "YML")]
+    pub opencv: PathBuf,
+}
+
+pub fn run_export(a: ExportArgs) -> Result<()> {
+    vpcal::output::check_destination("--opencv", &a.opencv)?;
+    let mut f = read_calib(&a.calib)?;
+    f.file
+        .refresh_export()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", a.calib.display()))?;
+    vpcal::output::write_opencv_yaml(&a.opencv, &f.file)?;
+    println!(
+        "{} -> {} ({})",
+        a.calib.display(),
+        a.opencv.display(),
+        if f.scale.is_some() {
+            "metres"
+        } else {
+            "road units: no metric scale yet"
+        }
+    );
+    Ok(())
+}
