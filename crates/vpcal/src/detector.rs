@@ -4,9 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use vpcal_video::detect::{FileDetector, MotionConfig, MotionDetector, OnnxLayout};
-use vpcal_video::{Detector, SourceInfo};
-
-use crate::pipeline::is_stills;
+use vpcal_video::{Detector, SourceInfo, SourceKind};
 
 /// The detector and its settings.
 #[derive(Debug, Clone)]
@@ -179,5 +177,15 @@ pub fn open_detector(a: &DetectorSettings, info: &SourceInfo) -> Result<Box<dyn 
             }
             Ok(Box::new(d))
         }
+    }
+}
+
+/// Whether the input is stills rather than consecutive frames: one image, or a folder of
+/// images without a frame rate (`--fps`) (with it, the folder is a frame sequence and is treated as video).
+pub fn is_stills(info: &SourceInfo) -> bool {
+    match info.kind {
+        SourceKind::Video => false,
+        SourceKind::SingleImage => true,
+        SourceKind::ImageFolder => info.fps.is_none(),
     }
 }

@@ -28,6 +28,7 @@ use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
 use vpcal_video::{Detector, Frame, FrameSource, SourceInfo, SourceKind, SourceOptions};
 
 use crate::aggregate::{aggregate, Aggregated, Method};
+pub use crate::detector::is_stills;
 use crate::detector::{open_detector, DetectorSettings};
 use crate::model::load_model;
 use crate::progress::{FrameProgress, Progress};
@@ -603,16 +604,6 @@ pub fn run_pipeline_on(
         picture: last_frame,
         warnings,
     })
-}
-
-/// Whether the input is stills rather than consecutive frames: one image, or a folder of
-/// images without a frame rate (`--fps`) (with it, the folder is a frame sequence and is treated as video).
-pub fn is_stills(info: &SourceInfo) -> bool {
-    match info.kind {
-        SourceKind::Video => false,
-        SourceKind::SingleImage => true,
-        SourceKind::ImageFolder => info.fps.is_none(),
-    }
 }
 
 /// Aggregate the records of `out` into a camera.
