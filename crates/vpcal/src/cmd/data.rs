@@ -79,6 +79,7 @@ pub struct BenchArgs {
     /// Augmentation preset: paper, reference or none.
     #[arg(long, default_value = "paper")]
     pub augment: String,
+    /// Seed of the samples drawn.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }

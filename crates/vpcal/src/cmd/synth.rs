@@ -73,15 +73,19 @@ pub struct SceneArgs {
     /// Output root (gets dataset/<name>/ and results/<name>/).
     #[arg(short = 'o', long = "output", alias = "out")]
     pub out: PathBuf,
+    /// Seed of the scene (camera, traffic, appearance).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Scene name (default: <layout>_s<seed>).
     #[arg(long)]
     pub name: Option<String>,
+    /// Frame width in pixels.
     #[arg(long, default_value_t = 1280)]
     pub width: u32,
+    /// Frame height in pixels.
     #[arg(long, default_value_t = 720)]
     pub height: u32,
+    /// Frames per second of the video.
     #[arg(long, default_value_t = 25.0)]
     pub fps: f64,
     /// Focal length in pixels (default: drawn from the seed).
@@ -148,11 +152,13 @@ pub struct SheetArgs {
     /// Number of crops shown.
     #[arg(long, default_value_t = 36)]
     pub count: usize,
+    /// Crops per row.
     #[arg(long, default_value_t = 6)]
     pub cols: usize,
     /// Tile size in pixels.
     #[arg(long, default_value_t = 220)]
     pub cell: u32,
+    /// Seed of the crops drawn.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Show the crops without the ground truth drawn over them.
