@@ -53,6 +53,15 @@ impl TestCamera {
         ]
     }
 
+    /// The pixel of road point `p` for the camera centre at road (0, 0, `h`).
+    fn project_from_height(&self, p: [f64; 3], h: f64) -> Point2 {
+        let c = self.dir([p[0], p[1], p[2] - h]);
+        Point2::new(
+            self.pp.x + self.f * c[0] / c[2],
+            self.pp.y + self.f * c[1] / c[2],
+        )
+    }
+
     fn vp(&self, d: [f64; 3]) -> Point2 {
         let c = self.dir(d);
         Point2::new(
@@ -99,20 +108,26 @@ fn camera_recovered_from_its_vanishing_points() {
     }
 }
 
+/// Height of [`road_camera`] above the road, metres.
+const ROAD_CAMERA_HEIGHT: f64 = 8.0;
+
+/// A camera looking down at a road (f = 1000 px, pp (640, 360)) and its calibration from the
+/// true VPs of the road's directions.
+fn road_camera() -> (TestCamera, Calibration) {
+    let pp = Point2::new(640.0, 360.0);
+    let cam = TestCamera::new(1000.0, pp, 0.35, 0.03, 0.2);
+    let calib =
+        Calibration::from_vps(cam.vp([0.0, 1.0, 0.0]), cam.vp([1.0, 0.0, 0.0]), pp).unwrap();
+    (cam, calib)
+}
+
 #[test]
 fn road_distances_match_a_known_camera_up_to_one_scale() {
     // Points on the road plane z = 0 seen by a camera at height h; the ratio of two projected
     // distances must equal the ratio of true distances.
-    let pp = Point2::new(640.0, 360.0);
-    let cam = TestCamera::new(1000.0, pp, 0.35, 0.03, 0.2);
-    let h = 8.0;
-    let project = |p: [f64; 3]| {
-        // Camera centre at road (0, 0, h).
-        let c = cam.dir([p[0], p[1], p[2] - h]);
-        Point2::new(pp.x + cam.f * c[0] / c[2], pp.y + cam.f * c[1] / c[2])
-    };
-    let calib =
-        Calibration::from_vps(cam.vp([0.0, 1.0, 0.0]), cam.vp([1.0, 0.0, 0.0]), pp).unwrap();
+    let (cam, calib) = road_camera();
+    let h = ROAD_CAMERA_HEIGHT;
+    let project = |p: [f64; 3]| cam.project_from_height(p, h);
     let a = (project([0.0, 20.0, 0.0]), project([3.0, 26.0, 0.0]));
     let b = (project([-4.0, 40.0, 0.0]), project([-4.0, 52.0, 0.0]));
     let da = calib.road_distance(a.0, a.1).unwrap();
@@ -134,15 +149,9 @@ fn road_distances_match_a_known_camera_up_to_one_scale() {
 
 #[test]
 fn the_road_frame_puts_the_camera_above_the_road_and_keeps_distances() {
-    let pp = Point2::new(640.0, 360.0);
-    let cam = TestCamera::new(1000.0, pp, 0.35, 0.03, 0.2);
-    let h = 8.0;
-    let project = |p: [f64; 3]| {
-        let c = cam.dir([p[0], p[1], p[2] - h]);
-        Point2::new(pp.x + cam.f * c[0] / c[2], pp.y + cam.f * c[1] / c[2])
-    };
-    let calib =
-        Calibration::from_vps(cam.vp([0.0, 1.0, 0.0]), cam.vp([1.0, 0.0, 0.0]), pp).unwrap();
+    let (cam, calib) = road_camera();
+    let h = ROAD_CAMERA_HEIGHT;
+    let project = |p: [f64; 3]| cam.project_from_height(p, h);
     let frame = calib.road_frame();
     // The camera centre in road coordinates is (0, 0, +plane distance): above the road, z up.
     let t = frame.translation;

@@ -116,11 +116,42 @@ pub struct Aggregated {
     /// The 68 % interval of the focal length, pixels: the bootstrap's when evidence gave it,
     /// [`assumed_focal_interval`] when it was assumed; `None` without either.
     pub focal_interval_px: Option<[f64; 2]>,
-    /// What the user should know about this calibration (an assumed focal length, ...).
-    pub warnings: Vec<String>,
 }
 
 impl Aggregated {
+    /// What the user should know about this calibration: that its focal length is assumed,
+    /// when it is.
+    pub fn warnings(&self) -> Vec<String> {
+        match (self.focal_source, self.focal_interval_px) {
+            (FocalSource::Prior, Some([lo, hi])) => vec![format!(
+                "the focal length is assumed, not measured ({:.0} px from the prior; \
+                 plausible {lo:.0}-{hi:.0} px): distances and speeds carry its error; give \
+                 the camera's focal length with --focal PX if it is known",
+                self.focal_px
+            )],
+            _ => Vec::new(),
+        }
+    }
+
+    /// The camera of this aggregation for principal point `pp`, with `focal_px` when the
+    /// focal length is known (see [`Aggregated::with_focal`]).
+    ///
+    /// # Errors
+    /// A given focal length that does not fit, or VPs that give no camera.
+    pub fn into_camera(
+        self,
+        pp: Point2,
+        focal_px: Option<f64>,
+    ) -> Result<(vpcal_geom::camera::Calibration, Aggregated), String> {
+        let agg = match focal_px {
+            Some(f) => self.with_focal(f, pp)?,
+            None => self,
+        };
+        let cal = vpcal_geom::camera::Calibration::from_vps(agg.vp1, agg.vp2, pp)
+            .map_err(|e| format!("the aggregated vanishing points give no camera: {e}"))?;
+        Ok((cal, agg))
+    }
+
     /// The same aggregation with a known focal length: VP1 and the horizon stay, VP2 moves
     /// along the horizon to the point orthogonal to VP1 for `focal_px`.
     ///
@@ -144,8 +175,6 @@ impl Aggregated {
         self.focal_px = focal_px;
         self.focal_source = FocalSource::Given;
         self.focal_interval_px = Some([focal_px, focal_px]);
-        self.warnings
-            .retain(|w| !w.contains("focal length is assumed"));
         Ok(self)
     }
 }
@@ -215,7 +244,6 @@ pub fn aggregate(
                 track_lines: Vec::new(),
                 focal_source: FocalSource::PerVehicle,
                 focal_interval_px: None,
-                warnings: Vec::new(),
             })
         }
         Method::Robust | Method::RobustNetwork => {
@@ -288,19 +316,12 @@ pub fn aggregate(
             } else {
                 FocalSource::Prior
             };
-            let mut warnings = Vec::new();
             let focal_interval_px = if focal_source.is_assumed() {
                 let [lo, hi] = assumed_focal_interval(image_size.0);
                 summary.push_str(&format!(
                     "; focal length ASSUMED ({:.0} px, the prior: no evidence fixed it; a \
                      {}-{}° view gives {lo:.0}-{hi:.0} px as its 68% interval)",
                     r.calibration.focal_px, TRAFFIC_FOV_DEG[0], TRAFFIC_FOV_DEG[1]
-                ));
-                warnings.push(format!(
-                    "the focal length is assumed, not measured ({:.0} px from the prior; \
-                     plausible {lo:.0}-{hi:.0} px): distances and speeds carry its error; give \
-                     the camera's focal length with --focal PX if it is known",
-                    r.calibration.focal_px
                 ));
                 Some([lo, hi])
             } else {
@@ -370,7 +391,6 @@ pub fn aggregate(
                 track_lines: r.track_lines,
                 focal_source,
                 focal_interval_px,
-                warnings,
             })
         }
     }

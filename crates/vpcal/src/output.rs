@@ -86,20 +86,27 @@ pub fn calibration_file(
     cal: &Calibration,
     agg: &Aggregated,
 ) -> CalibrationFile {
-    let mut file = CalibrationFile::calibrated(input_summary(out), cal);
-    file.evidence = Some(agg.evidence.clone());
-    file.confidence = agg.confidence.clone();
-    file.summary = Some(agg.summary.clone());
-    set_focal_evidence(&mut file, agg);
+    let mut file = aggregated_file(input_summary(out), cal, agg);
     file.settings = settings(out, config);
     file
 }
 
-/// The focal length's source, interval and the aggregation's warnings, into `file`.
-pub fn set_focal_evidence(file: &mut CalibrationFile, agg: &Aggregated) {
+/// The calibration file of camera `cal` aggregated as `agg` from what `input` describes
+/// (footage, or a file of per-vehicle records): the camera, the aggregation's evidence,
+/// confidence and summary, the focal length's source and interval, and the warnings.
+pub fn aggregated_file(
+    input: InputSummary,
+    cal: &Calibration,
+    agg: &Aggregated,
+) -> CalibrationFile {
+    let mut file = CalibrationFile::calibrated(input, cal);
+    file.evidence = Some(agg.evidence.clone());
+    file.confidence = agg.confidence.clone();
+    file.summary = Some(agg.summary.clone());
     file.focal_source = Some(agg.focal_source.name().to_string());
     file.focal_interval_px = agg.focal_interval_px;
-    file.warnings = agg.warnings.clone();
+    file.warnings = agg.warnings();
+    file
 }
 
 /// The calibration file of a run that found no camera, for `reason`.

@@ -626,13 +626,8 @@ pub fn calibrate(
         config.min_score,
         config.bootstrap,
     )?;
-    let agg = match config.focal_px {
-        Some(f) => agg.with_focal(f, pp).map_err(anyhow::Error::msg)?,
-        None => agg,
-    };
-    let cal = Calibration::from_vps(agg.vp1, agg.vp2, pp)
-        .map_err(|e| anyhow::anyhow!("the aggregated vanishing points give no camera: {e}"))?;
-    Ok((cal, agg))
+    agg.into_camera(pp, config.focal_px)
+        .map_err(anyhow::Error::msg)
 }
 
 #[cfg(test)]

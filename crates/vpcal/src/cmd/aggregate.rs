@@ -9,7 +9,6 @@ use vpcal::pipeline::PrincipalPoint;
 use vpcal_formats::calib::{CalibrationFile, InputSummary};
 use vpcal_formats::reference::{infer_image_size, read_vpout};
 use vpcal_geom::aggregate::VehicleVps;
-use vpcal_geom::camera::Calibration;
 
 use super::{Exit, UsageError};
 
@@ -102,24 +101,12 @@ pub fn run(args: Args) -> Result<Exit> {
         args.bootstrap,
     )
     .with_context(|| format!("aggregating {}", args.vpout.display()))
-    .and_then(|agg| match args.focal {
-        Some(f) => agg.with_focal(f, pp).map_err(anyhow::Error::msg),
-        None => Ok(agg),
-    })
-    .and_then(|agg| {
-        let cal = Calibration::from_vps(agg.vp1, agg.vp2, pp)
-            .map_err(|e| anyhow::anyhow!("the aggregated vanishing points give no camera: {e}"))?;
-        Ok((cal, agg))
-    });
+    .and_then(|agg| agg.into_camera(pp, args.focal).map_err(anyhow::Error::msg));
     let (mut file, exit) = match &result {
         Ok((cal, agg)) => {
-            let mut file = CalibrationFile::calibrated(input, cal);
-            file.evidence = Some(agg.evidence.clone());
-            file.confidence = agg.confidence.clone();
-            file.summary = Some(agg.summary.clone());
-            vpcal::output::set_focal_evidence(&mut file, agg);
+            let file = vpcal::output::aggregated_file(input, cal, agg);
             eprintln!("{}", agg.summary);
-            for w in &agg.warnings {
+            for w in &file.warnings {
                 eprintln!("warning: {w}");
             }
             eprintln!(

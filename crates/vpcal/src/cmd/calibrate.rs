@@ -316,7 +316,7 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
         Err(e) => row("result", format!("NOT CALIBRATED: {e:#}")),
     }
     if let Ok((_, agg)) = result {
-        for w in &agg.warnings {
+        for w in agg.warnings() {
             eprintln!("warning: {w}");
         }
     }
