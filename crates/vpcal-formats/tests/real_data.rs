@@ -175,3 +175,133 @@ fn detections_and_system_files_read() {
     assert_eq!(sys.calibration.pp.x, 960.5);
     assert!(!sys.cars.is_empty());
 }
+
+/// The BrnoCompSpeed speed evaluation (`vpcal_formats::bcs_speed`) of session0_center's
+/// DubskaCalib tracks, against the numbers printed by the independent numpy implementation
+/// `scripts/bcs_speed_reference.py` (run from the workspace root with numpy):
+///
+/// ```text
+/// python3 scripts/bcs_speed_reference.py ../shared/data/bcs/dataset ../shared/data/bcs/results \
+///     dubska_bmvc14 --videos session0_center [--mode full] \
+///     [--camera-truth ../shared/data/bcs/camera_truth.json]
+/// ```
+///
+/// (a) the system file's own camera and scale, (b) camera_truth.json's camera with the scale
+/// fitted to the taped distances; median and full modes. All four give 37 measured cars, no
+/// crossing failure, 32 of 34 valid GT cars matched, 6 false positives.
+#[test]
+fn speed_evaluation_matches_the_numpy_reference() {
+    use vpcal_formats::bcs_speed::{
+        evaluate_video, read_camera_truth, Road, SpeedMode, BCS_IMAGE_SIZE,
+    };
+    use vpcal_geom::camera::Calibration;
+    use vpcal_geom::metrics::optimal_scale;
+
+    let Some(bcs) = bcs_dir() else { return };
+    let gt = read_gt(&bcs.join("dataset/session0_center")).unwrap();
+    let sys = read_system(&bcs.join("results/session0_center/system_dubska_bmvc14.json")).unwrap();
+    let c = sys.calibration;
+    let own = Calibration::from_vps(c.vp1, c.vp2, c.pp).unwrap();
+    let truth = read_camera_truth(&bcs.join("camera_truth.json")).unwrap()["session0_center"];
+    let truth_cam = Calibration::from_vps(truth.vp1, truth.vp2, truth.pp).unwrap();
+    let fitted = optimal_scale(&truth_cam, &gt.road_measurements()).unwrap();
+    assert!((fitted - 0.01801321071193049).abs() < 1e-15, "{fitted}");
+
+    // (camera, scale, mode, [abs mean, median, p95, max], [rel mean, median, p95, max])
+    let cases = [
+        (
+            &own,
+            c.scale,
+            SpeedMode::Median,
+            [
+                11.968324646162424,
+                11.793631614327857,
+                13.773106465662888,
+                15.653690326942723,
+            ],
+            [
+                14.95394788884921,
+                15.386795762932998,
+                17.48739522737558,
+                17.88544130386934,
+            ],
+        ),
+        (
+            &own,
+            c.scale,
+            SpeedMode::Full,
+            [
+                12.600438109003996,
+                12.665045560208313,
+                14.769613212959452,
+                16.673173645846717,
+            ],
+            [
+                15.767903343341937,
+                15.813637508249476,
+                18.245940539553132,
+                23.861904735100907,
+            ],
+        ),
+        (
+            &truth_cam,
+            fitted,
+            SpeedMode::Median,
+            [
+                1.0815279736129177,
+                1.0548466595736983,
+                1.851100248694567,
+                2.163409629395545,
+            ],
+            [
+                1.3643477353912914,
+                1.3778222207923132,
+                2.316915322217568,
+                2.588020818074438,
+            ],
+        ),
+        (
+            &truth_cam,
+            fitted,
+            SpeedMode::Full,
+            [
+                1.893939957766532,
+                1.0392987353690444,
+                4.296318295840569,
+                21.858829722524476,
+            ],
+            [
+                2.468015054420139,
+                1.3113756180207123,
+                6.109709927519531,
+                28.949505912691787,
+            ],
+        ),
+    ];
+    for (calib, scale, mode, abs, rel) in cases {
+        let road = Road { calib, scale };
+        let v = evaluate_video(&gt, &sys.cars, &road, mode, BCS_IMAGE_SIZE).unwrap();
+        assert_eq!(
+            (
+                v.measured,
+                v.crossing_failures,
+                v.matched,
+                v.valid,
+                v.false_positives
+            ),
+            (37, 0, 32, 34, 6),
+            "{mode:?}"
+        );
+        assert_eq!(v.recall, Some(32.0 / 34.0));
+        for (got, want) in [(v.abs_kmh.unwrap(), abs), (v.rel_pct.unwrap(), rel)] {
+            assert_eq!(got.n, 32);
+            let got = [got.mean, got.median, got.p95, got.max];
+            for (g, w) in got.iter().zip(want) {
+                assert!(
+                    (g - w).abs() < 1e-9,
+                    "{mode:?} scale {scale}: {got:?} vs {want:?}"
+                );
+            }
+        }
+    }
+}

@@ -506,3 +506,61 @@ fn robust_aggregation_halves_the_reference_error_on_real_cnn_outputs() {
     assert_eq!(variants, 3);
     assert!(best < 9.0, "best robust pooled mean {best}");
 }
+
+/// `vpcal eval speed` on session0_center's real ground truth and DubskaCalib tracks (copied
+/// into a temporary dataset of that one video): strict JSON, recall in [0, 1], and the counts
+/// of the numpy reference (`scripts/bcs_speed_reference.py`, see vpcal-formats'
+/// `speed_evaluation_matches_the_numpy_reference`).
+#[test]
+fn eval_speed_on_session0_center() {
+    let Some(data) = data_dir() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let (dataset, results) = (tmp.path().join("dataset"), tmp.path().join("results"));
+    for (from, to) in [
+        ("bcs/dataset/session0_center/gt_data.pkl", &dataset),
+        (
+            "bcs/results/session0_center/system_dubska_bmvc14.json",
+            &results,
+        ),
+    ] {
+        let from = data.join(from);
+        let dir = to.join("session0_center");
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::copy(&from, dir.join(from.file_name().unwrap())).unwrap();
+    }
+    let base = [
+        "eval",
+        "speed",
+        "--dataset",
+        dataset.to_str().unwrap(),
+        "--results",
+        results.to_str().unwrap(),
+    ];
+    let out = vpcal(&[&base[..], &["--json"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    let s = &json[0];
+    assert_eq!(s["system"], "dubska_bmvc14");
+    assert_eq!(s["mode"], "median");
+    let v = &s["videos"][0];
+    assert_eq!(v["status"], "ok");
+    let recall = v["recall"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&recall), "{recall}");
+    assert_eq!(
+        (v["matched"].as_u64(), v["valid"].as_u64()),
+        (Some(32), Some(34))
+    );
+    assert_eq!(v["false_positives"], 6);
+    let mean = s["pooled"]["abs_kmh"]["mean"].as_f64().unwrap();
+    assert!((mean - 11.968324646162424).abs() < 1e-6, "{mean}");
+
+    // The reference camera (with a fitted scale) and full mode, as a table.
+    let truth = data.join("bcs/camera_truth.json");
+    let extra = ["--camera-truth", truth.to_str().unwrap(), "--mode", "full"];
+    let out = vpcal(&[&base[..], &extra[..]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = stdout(&out);
+    assert!(table.contains("full mode, cameras of"), "{table}");
+    assert!(table.contains("session0_center"), "{table}");
+    assert!(table.contains("1.89"), "{table}");
+}

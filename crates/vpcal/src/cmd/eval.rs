@@ -5,15 +5,25 @@
 //! distances (independent of the scale), and the distance error with the file's scale (BCS) or
 //! with the optimal per-session scale (BrnoCarPark). Pooled rows concatenate all pairs, as the
 //! paper does.
+//!
+//! `eval speed` runs the official speed evaluation (`vpcal_formats::bcs_speed`) on the systems'
+//! vehicle tracks, with the file's camera and scale, or with a reference camera and a scale
+//! fitted to the taped distances.
 
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use vpcal::aggregate::{aggregate, edgelets_of, Method};
 use vpcal_formats::bcp::read_gt_pairs;
-use vpcal_formats::bcs::{self, read_gt, read_system, write_system, SystemCalibration, SystemFile};
+use vpcal_formats::bcs::{
+    self, read_gt, read_system, write_system, GtData, SystemCalibration, SystemFile,
+};
+use vpcal_formats::bcs_speed::{
+    evaluate_video, pool as pool_speed, read_camera_truth, CameraTruth, PooledSpeed, Road,
+    SpeedError, SpeedMode, VideoSpeed,
+};
 use vpcal_formats::reference::read_vpout;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
@@ -32,6 +42,47 @@ pub enum EvalCommand {
     /// Aggregate per-vehicle VP files (VP_OUTPUTS/<video>/VPout_*.json) with several methods
     /// and compare their BrnoCompSpeed ratio errors, per video and pooled.
     Vpout(VpoutArgs),
+    /// BrnoCompSpeed speed evaluation (the official protocol of the dataset's eval.py): the
+    /// vehicle tracks ("cars") of RESULTS/<video>/system_<name>.json measured with the file's
+    /// camera and scale, matched to the ground-truth cars of DATASET/<video>/gt_data.pkl.
+    Speed(SpeedArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SpeedArgs {
+    /// The dataset directory (holds sessionN_{left,center,right}/gt_data.pkl).
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// The results directory (holds sessionN_{...}/system_<name>.json with "cars" tracks).
+    #[arg(long)]
+    pub results: PathBuf,
+    /// Systems to evaluate (the <name> of system_<name>.json); default: every system found.
+    #[arg(long, num_args = 1..)]
+    pub system: Vec<String>,
+    /// Only the sessions of an official split: A (1-6), B (3-6) or C (4-6).
+    #[arg(long, value_parser = parse_split)]
+    pub split: Option<char>,
+    /// How a car's speed is measured: median (of the speeds over 5-point steps of its track,
+    /// the official default) or full (between its crossings of the first and last
+    /// measurement lines).
+    #[arg(long, default_value = "median", value_parser = speed_mode())]
+    pub mode: SpeedMode,
+    /// Measure the tracks with another camera: FILE's cameras[<video>] {vp1, vp2, pp} (the
+    /// layout of camera_truth.json) with a scale fitted to the video's taped distances
+    /// (gt distanceMeasurement), instead of the system file's camera and scale. With the
+    /// reference cameras this gives the tracks' own error floor.
+    #[arg(long, value_name = "FILE")]
+    pub camera_truth: Option<PathBuf>,
+    /// Keep the system file's camera but fit its scale to the video's taped distances
+    /// (always so with --camera-truth).
+    #[arg(long)]
+    pub fit_scale: bool,
+    /// Image size WxH of the videos: points within 10 px of its border are not used.
+    #[arg(long, value_parser = super::args::size, default_value = "1920x1080")]
+    pub image_size: (u32, u32),
+    /// Print machine-readable JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -97,6 +148,12 @@ pub struct BcpArgs {
     pub json: bool,
 }
 
+fn speed_mode() -> impl clap::builder::TypedValueParser<Value = SpeedMode> {
+    use clap::builder::TypedValueParser as _;
+    clap::builder::PossibleValuesParser::new(["median", "full"])
+        .map(|s| s.parse().unwrap_or(SpeedMode::Median))
+}
+
 fn parse_split(s: &str) -> Result<char, String> {
     let c = s.chars().next().unwrap_or(' ').to_ascii_uppercase();
     if s.len() == 1 && bcs::split_sessions(c).is_some() {
@@ -111,6 +168,7 @@ pub fn run(cmd: EvalCommand) -> Result<()> {
         EvalCommand::Bcs(args) => run_bcs(&args),
         EvalCommand::Bcp(args) => run_bcp(&args),
         EvalCommand::Vpout(args) => run_vpout(&args),
+        EvalCommand::Speed(args) => run_speed(&args),
     }
 }
 
@@ -272,6 +330,33 @@ fn read_system_opt(path: &Path) -> Result<Option<SystemFile>> {
     }
 }
 
+/// The video directories of a BrnoCompSpeed dataset, only those of `split`'s sessions when
+/// given.
+fn split_videos(dataset: &Path, split: Option<char>) -> Result<Vec<(String, PathBuf)>> {
+    let mut videos = bcs::list_videos(dataset)
+        .with_context(|| format!("listing the BrnoCompSpeed dataset {}", dataset.display()))?;
+    if let Some(split) = split {
+        let sessions = bcs::split_sessions(split).unwrap_or(&[]);
+        videos.retain(|(name, _)| {
+            bcs::parse_video_name(name).is_some_and(|(s, _)| sessions.contains(&s))
+        });
+    }
+    Ok(videos)
+}
+
+/// [`split_videos`], at least one.
+fn dataset_videos(dataset: &Path, split: Option<char>) -> Result<Vec<(String, PathBuf)>> {
+    let videos = split_videos(dataset, split)?;
+    if videos.is_empty() {
+        bail!(
+            "no video with gt_data.pkl or gt_data.json under {}{}",
+            dataset.display(),
+            split.map_or(String::new(), |s| format!(" in split {s}"))
+        );
+    }
+    Ok(videos)
+}
+
 /// Evaluate BrnoCompSpeed results; the library entry point of `vpcal eval bcs`.
 ///
 /// # Errors
@@ -282,21 +367,7 @@ pub fn evaluate_bcs(
     split: Option<char>,
     systems: &[String],
 ) -> Result<Vec<SystemResult>> {
-    let mut videos = bcs::list_videos(dataset)
-        .with_context(|| format!("listing the BrnoCompSpeed dataset {}", dataset.display()))?;
-    if let Some(split) = split {
-        let sessions = bcs::split_sessions(split).unwrap_or(&[]);
-        videos.retain(|(name, _)| {
-            bcs::parse_video_name(name).is_some_and(|(s, _)| sessions.contains(&s))
-        });
-    }
-    if videos.is_empty() {
-        bail!(
-            "no video with gt_data.pkl or gt_data.json under {}{}",
-            dataset.display(),
-            split.map_or(String::new(), |s| format!(" in split {s}"))
-        );
-    }
+    let videos = dataset_videos(dataset, split)?;
     let names = system_names(
         systems,
         videos.iter().map(|(v, _)| results.join(v)),
@@ -474,18 +545,7 @@ pub struct VpoutResult {
 /// # Errors
 /// Unreadable directories, ground truth or VPout files; no video with both.
 pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
-    let mut videos = bcs::list_videos(&args.dataset).with_context(|| {
-        format!(
-            "listing the BrnoCompSpeed dataset {}",
-            args.dataset.display()
-        )
-    })?;
-    if let Some(split) = args.split {
-        let sessions = bcs::split_sessions(split).unwrap_or(&[]);
-        videos.retain(|(name, _)| {
-            bcs::parse_video_name(name).is_some_and(|(s, _)| sessions.contains(&s))
-        });
-    }
+    let videos = split_videos(&args.dataset, args.split)?;
     // (video, measurements, [(variant, file)])
     let mut work = Vec::new();
     let mut variants = BTreeSet::new();
@@ -671,5 +731,285 @@ fn run_vpout(args: &VpoutArgs) -> Result<()> {
         }
         println!("{pooled}");
     }
+    Ok(())
+}
+
+/// Where the camera and scale of a speed evaluation come from.
+enum SpeedCamera {
+    /// The system file's camera; its scale, or one fitted to the taped distances.
+    System { fit_scale: bool },
+    /// The reference cameras of a file, with fitted scales.
+    Truth {
+        path: PathBuf,
+        cameras: BTreeMap<String, CameraTruth>,
+    },
+}
+
+impl SpeedCamera {
+    fn describe(&self) -> String {
+        match self {
+            SpeedCamera::System { fit_scale: false } => {
+                "camera and scale from the system file".into()
+            }
+            SpeedCamera::System { fit_scale: true } => {
+                "the system file's camera, scale fitted to the taped distances".into()
+            }
+            SpeedCamera::Truth { path, .. } => format!(
+                "cameras of {}, scale fitted to the taped distances",
+                path.display()
+            ),
+        }
+    }
+}
+
+/// One video of a speed evaluation.
+#[derive(Debug, Clone, Serialize)]
+pub struct SpeedVideoResult {
+    pub video: String,
+    /// `ok`, `missing` (no system file) or `invalid` (no camera or scale).
+    pub status: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// Metres per road-plane unit used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+    #[serde(flatten)]
+    pub speed: Option<VideoSpeed>,
+}
+
+/// One system's speed evaluation over all videos.
+#[derive(Debug, Clone, Serialize)]
+pub struct SpeedSystemResult {
+    pub system: String,
+    pub mode: SpeedMode,
+    /// Where the camera and the scale came from.
+    pub camera: String,
+    pub videos: Vec<SpeedVideoResult>,
+    /// Over the `ok` videos.
+    pub pooled: PooledSpeed,
+    pub evaluated: usize,
+    pub missing: usize,
+    pub invalid: usize,
+}
+
+/// The ground-truth file of a video directory (the one `read_gt` reads), for messages.
+fn gt_file(dir: &Path) -> PathBuf {
+    let pkl = dir.join("gt_data.pkl");
+    if pkl.is_file() {
+        pkl
+    } else {
+        dir.join("gt_data.json")
+    }
+}
+
+fn speed_video(
+    video: &str,
+    dir: &Path,
+    gt: &GtData,
+    system_path: &Path,
+    camera: &SpeedCamera,
+    mode: SpeedMode,
+    image: [f64; 2],
+) -> Result<SpeedVideoResult> {
+    let mut r = SpeedVideoResult {
+        video: video.to_string(),
+        status: "missing",
+        reason: None,
+        scale: None,
+        speed: None,
+    };
+    let Some(system) = read_system_opt(system_path)? else {
+        return Ok(r);
+    };
+    r.status = "invalid";
+    let c = &system.calibration;
+    let (vp1, vp2, pp, file_scale) = match camera {
+        SpeedCamera::System { fit_scale } => (c.vp1, c.vp2, c.pp, (!fit_scale).then_some(c.scale)),
+        SpeedCamera::Truth { path, cameras } => match cameras.get(video) {
+            Some(t) => (t.vp1, t.vp2, t.pp, None),
+            None => {
+                r.reason = Some(format!("no camera for {video} in {}", path.display()));
+                return Ok(r);
+            }
+        },
+    };
+    let calib = match Calibration::from_vps(vp1, vp2, pp) {
+        Ok(calib) => calib,
+        Err(e) => {
+            r.reason = Some(e.to_string());
+            return Ok(r);
+        }
+    };
+    let scale = match file_scale {
+        Some(s) => s,
+        None => match optimal_scale(&calib, &gt.road_measurements()) {
+            Some(s) => s,
+            None => {
+                r.reason = Some(format!(
+                    "no scale fits the taped distances (distanceMeasurement) of {}",
+                    gt_file(dir).display()
+                ));
+                return Ok(r);
+            }
+        },
+    };
+    let road = Road {
+        calib: &calib,
+        scale,
+    };
+    let speed = evaluate_video(gt, &system.cars, &road, mode, image).map_err(|e| {
+        let file = match e {
+            SpeedError::TrackLengths { .. } => system_path.to_path_buf(),
+            _ => gt_file(dir),
+        };
+        anyhow::anyhow!("{}: {e}", file.display())
+    })?;
+    r.status = "ok";
+    r.scale = Some(scale);
+    r.speed = Some(speed);
+    Ok(r)
+}
+
+/// Run the BrnoCompSpeed speed evaluation; the library entry point of `vpcal eval speed`.
+///
+/// # Errors
+/// Unreadable directories, ground truth, system or camera files; ground truth the protocol
+/// cannot use; no video found.
+pub fn evaluate_speed(args: &SpeedArgs) -> Result<Vec<SpeedSystemResult>> {
+    let videos = dataset_videos(&args.dataset, args.split)?;
+    let names = system_names(
+        &args.system,
+        videos.iter().map(|(v, _)| args.results.join(v)),
+        &args.results,
+        "videos",
+    )?;
+    let camera = match &args.camera_truth {
+        Some(path) => SpeedCamera::Truth {
+            path: path.clone(),
+            cameras: read_camera_truth(path)?,
+        },
+        None => SpeedCamera::System {
+            fit_scale: args.fit_scale,
+        },
+    };
+    let gts: Vec<GtData> = videos
+        .par_iter()
+        .map(|(_, dir)| Ok(read_gt(dir)?))
+        .collect::<Result<_>>()?;
+    let image = [f64::from(args.image_size.0), f64::from(args.image_size.1)];
+    let mut out = Vec::new();
+    for system in names {
+        let rows: Vec<SpeedVideoResult> = videos
+            .par_iter()
+            .zip(&gts)
+            .map(|((video, dir), gt)| {
+                let path = args
+                    .results
+                    .join(video)
+                    .join(format!("system_{system}.json"));
+                speed_video(video, dir, gt, &path, &camera, args.mode, image)
+            })
+            .collect::<Result<_>>()?;
+        let count = |s: &str| rows.iter().filter(|v| v.status == s).count();
+        out.push(SpeedSystemResult {
+            system,
+            mode: args.mode,
+            camera: camera.describe(),
+            pooled: pool_speed(rows.iter().filter_map(|r| r.speed.as_ref())),
+            evaluated: count("ok"),
+            missing: count("missing"),
+            invalid: count("invalid"),
+            videos: rows,
+        });
+    }
+    Ok(out)
+}
+
+fn run_speed(args: &SpeedArgs) -> Result<()> {
+    let results = evaluate_speed(args)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+        return Ok(());
+    }
+    let fmt = |x: Option<f64>, prec: usize| x.map_or("-".to_string(), |v| format!("{v:.prec$}"));
+    for (k, s) in results.iter().enumerate() {
+        if k > 0 {
+            println!();
+        }
+        println!("system {}: {} mode, {}", s.system, s.mode.name(), s.camera);
+        println!("  absolute error km/h (n, mean, median, p95, max) | mean relative error %");
+        println!(
+            "{:<18} {:>8} | {:>5} {:>7} {:>7} {:>7} {:>7} | {:>6} | {:>13} {:>6} {:>5}",
+            "video",
+            "scale",
+            "n",
+            "mean",
+            "median",
+            "p95",
+            "max",
+            "mean",
+            "matched/valid",
+            "recall",
+            "FP"
+        );
+        let row = |name: &str,
+                   scale: String,
+                   abs: Option<&Summary>,
+                   rel: Option<&Summary>,
+                   matched: usize,
+                   valid: usize,
+                   recall: Option<f64>,
+                   fp: usize| {
+            println!(
+                "{:<18} {:>8} | {:>5} {:>7} {:>7} {:>7} {:>7} | {:>6} | {:>13} {:>6} {:>5}",
+                name,
+                scale,
+                abs.map_or(0, |a| a.n),
+                fmt(abs.map(|a| a.mean), 2),
+                fmt(abs.map(|a| a.median), 2),
+                fmt(abs.map(|a| a.p95), 2),
+                fmt(abs.map(|a| a.max), 2),
+                fmt(rel.map(|r| r.mean), 2),
+                format!("{matched}/{valid}"),
+                fmt(recall, 3),
+                fp
+            );
+        };
+        for v in &s.videos {
+            match (&v.speed, v.status) {
+                (Some(sp), _) => row(
+                    &v.video,
+                    fmt(v.scale, 5),
+                    sp.abs_kmh.as_ref(),
+                    sp.rel_pct.as_ref(),
+                    sp.matched,
+                    sp.valid,
+                    sp.recall,
+                    sp.false_positives,
+                ),
+                (None, "missing") => println!("{:<18} missing (no system file)", v.video),
+                (None, _) => println!(
+                    "{:<18} invalid: {}",
+                    v.video,
+                    v.reason.as_deref().unwrap_or("no camera")
+                ),
+            }
+        }
+        let p = &s.pooled;
+        row(
+            &format!("pooled ({}/{})", s.evaluated, s.videos.len()),
+            String::new(),
+            p.abs_kmh.as_ref(),
+            p.rel_pct.as_ref(),
+            p.matched,
+            p.valid,
+            p.recall,
+            p.false_positives,
+        );
+    }
+    println!(
+        "\nrecall: matched valid GT cars / valid GT cars (pooled: mean over videos); FP: false \
+         positives (pooled: sum)"
+    );
     Ok(())
 }
