@@ -100,3 +100,24 @@ pub fn optimal_scale(calib: &Calibration, m: &[RoadMeasurement]) -> Option<f64> 
         .collect();
     weighted_median(&ratios, &weights)
 }
+
+/// The line angle (radians, in `(-π/2, π/2]`) of the direction from `at` towards the point
+/// `h`, given in homogeneous coordinates `[x, y, w]` (a point at infinity, `w = 0`, is a
+/// direction); `None` when `h` is `at` itself or not finite.
+pub fn direction_towards(at: Point2, h: [f64; 3]) -> Option<f64> {
+    let (dx, dy) = (h[0] - h[2] * at.x, h[1] - h[2] * at.y);
+    if !(dx.is_finite() && dy.is_finite()) || dx == 0.0 && dy == 0.0 {
+        return None;
+    }
+    Some(crate::aggregate::line_angle_diff(dy.atan2(dx)))
+}
+
+/// The direction error of a vanishing point seen from `at` (a vehicle's box centre): the
+/// angle between the lines from `at` towards `predicted` and towards `truth` (homogeneous,
+/// see [`direction_towards`]), modulo 180°, in degrees `[0, 90]`. `None` when either
+/// direction is undefined.
+pub fn direction_error_deg(at: Point2, predicted: [f64; 3], truth: [f64; 3]) -> Option<f64> {
+    let a = direction_towards(at, predicted)?;
+    let b = direction_towards(at, truth)?;
+    Some(crate::aggregate::line_angle_diff(a - b).abs().to_degrees())
+}

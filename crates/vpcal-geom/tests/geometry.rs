@@ -443,3 +443,124 @@ proptest! {
         prop_assert_eq!(dec.argmax, (h.x.floor() as usize, h.y.floor() as usize));
     }
 }
+
+/// Edgelets scattered over a box, each pointing exactly at `vp` (homogeneous).
+fn edgelets_towards(
+    centre: Point2,
+    vp: [f64; 3],
+    n: usize,
+) -> Vec<vpcal_geom::aggregate::edgelets::Edgelet> {
+    (0..n)
+        .map(|i| {
+            let p = centre + Point2::new((i % 7) as f64 * 6.0 - 18.0, (i / 7) as f64 * 5.0 - 10.0);
+            let d = Point2::new(vp[0] - vp[2] * p.x, vp[1] - vp[2] * p.y);
+            vpcal_geom::aggregate::edgelets::Edgelet {
+                x: p.x,
+                y: p.y,
+                angle: d.y.atan2(d.x),
+                strength: 1.0,
+            }
+        })
+        .collect()
+}
+
+proptest! {
+    /// A vehicle's edgelets that all point at one VP give that VP's direction back, near or
+    /// at infinity, and the direction error metric reads it as zero.
+    #[test]
+    fn vehicle_vp_recovers_the_direction(
+        angle in -1.5f64..1.5,
+        distance in 300.0f64..1.0e6,
+        behind in proptest::bool::ANY,
+    ) {
+        use vpcal_geom::aggregate::vehicle_vp::vehicle_vp;
+        use vpcal_geom::metrics::direction_error_deg;
+        let c = Point2::new(400.0, 300.0);
+        let s = if behind { -1.0 } else { 1.0 };
+        let vp = c + Point2::new(angle.cos(), angle.sin()) * (s * distance);
+        let h = [vp.x, vp.y, 1.0];
+        let e = edgelets_towards(c, h, 21);
+        let fit = vehicle_vp(c, &e, 60.0, 1.0).unwrap();
+        let err = direction_error_deg(c, fit.point, h).unwrap();
+        prop_assert!(err < 0.05, "direction error {err}°");
+    }
+}
+
+#[test]
+fn direction_error_handles_points_at_infinity() {
+    use vpcal_geom::metrics::{direction_error_deg, direction_towards};
+    let c = Point2::new(10.0, 20.0);
+    // A horizontal direction at infinity and a far point on the same row: the same line.
+    let err = direction_error_deg(c, [1.0, 0.0, 0.0], [-1.0e9, 20.0, 1.0]).unwrap();
+    assert!(err < 1e-9, "{err}");
+    // Perpendicular lines are 90° apart; opposite directions are the same line.
+    let err = direction_error_deg(c, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]).unwrap();
+    assert!((err - 90.0).abs() < 1e-9);
+    assert!(direction_error_deg(c, [-3.0, 0.0, 0.0], [3.0, 0.0, 0.0]).unwrap() < 1e-9);
+    // The centre itself has no direction.
+    assert_eq!(direction_towards(c, [10.0, 20.0, 1.0]), None);
+    assert!(vpcal_geom::aggregate::vehicle_vp::vehicle_vp(c, &[], 50.0, 1.0).is_none());
+}
+
+/// Boxes of vehicles standing on a road seen by a camera whose horizon is the row `horizon_y`
+/// (roll 0): size proportional to the distance below it, with a spread of vehicle sizes.
+fn road_boxes(horizon_y: f64, n: usize) -> Vec<BoxPx> {
+    (0..n)
+        .map(|i| {
+            let y1 = horizon_y + 40.0 + (i as f64 * 37.0) % 600.0;
+            let x = 100.0 + (i as f64 * 53.0) % 1500.0;
+            let s = (y1 - horizon_y) * (0.15 + 0.05 * ((i % 5) as f64 / 4.0));
+            BoxPx {
+                x0: x,
+                y0: y1 - 0.8 * s,
+                x1: x + 1.2 * s,
+                y1,
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn vehicle_sizes_agree_with_the_true_horizon_and_contradict_a_wrong_one() {
+    use vpcal_geom::aggregate::sizes::{size_slope, MIN_SIZE_SLOPE};
+    use vpcal_geom::Line;
+    let boxes = road_boxes(300.0, 200);
+    let w = vec![1.0; boxes.len()];
+    let row = |y: f64| Line([0.0, 1.0, -y]);
+    let right = size_slope(&boxes, &w, row(300.0), 1920.0, 1080.0).unwrap();
+    assert!((right.slope - 1.0).abs() < 0.05, "{right:?}");
+    // A camera looking straight down sees all vehicles alike: against a horizon placed at
+    // the top of the frame, their sizes do not grow.
+    let alike: Vec<BoxPx> = (0..200)
+        .map(|i| {
+            let (x, y) = (
+                100.0 + (i as f64 * 53.0) % 1500.0,
+                50.0 + (i as f64 * 37.0) % 900.0,
+            );
+            BoxPx {
+                x0: x,
+                y0: y,
+                x1: x + 90.0 + (i % 5) as f64 * 8.0,
+                y1: y + 60.0,
+            }
+        })
+        .collect();
+    let wrong = size_slope(&alike, &w, row(20.0), 1920.0, 1080.0).unwrap();
+    assert!(wrong.slope < MIN_SIZE_SLOPE, "{wrong:?}");
+    // Repeated boxes of one static false detection, weighted down, do not outvote traffic.
+    let mut mixed = boxes.clone();
+    let mut mw = w.clone();
+    for _ in 0..1000 {
+        mixed.push(BoxPx {
+            x0: 900.0,
+            y0: 900.0,
+            x1: 920.0,
+            y1: 915.0,
+        });
+        mw.push(0.003);
+    }
+    let s = size_slope(&mixed, &mw, row(300.0), 1920.0, 1080.0).unwrap();
+    assert!((s.slope - 1.0).abs() < 0.1, "{s:?}");
+    // Too few boxes: no verdict.
+    assert!(size_slope(&boxes[..10], &w[..10], row(300.0), 1920.0, 1080.0).is_none());
+}

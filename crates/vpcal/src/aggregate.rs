@@ -84,16 +84,14 @@ impl FocalSource {
     }
 }
 
-/// Horizontal fields of view of traffic cameras, degrees: from a telephoto view far along a
-/// motorway (15°) to a wide-angle view of a junction (90°).
-pub const TRAFFIC_FOV_DEG: [f64; 2] = [15.0, 90.0];
+pub use vpcal_geom::aggregate::robust::TRAFFIC_FOV_DEG;
 
 /// The 68 % interval of a focal length nobody measured, for frames `width` pixels wide: the
 /// central 68 % (16th to 84th percentile) of a distribution uniform in `ln f` over the focal
 /// lengths of [`TRAFFIC_FOV_DEG`] (`f = (W / 2) / tan(fov / 2)`).
 pub fn assumed_focal_interval(width: u32) -> [f64; 2] {
     let w = f64::from(width);
-    let f_of = |fov_deg: f64| w / 2.0 / (fov_deg.to_radians() / 2.0).tan();
+    let f_of = |fov_deg: f64| w * vpcal_geom::aggregate::robust::focal_widths(fov_deg);
     let (lo, hi) = (f_of(TRAFFIC_FOV_DEG[1]).ln(), f_of(TRAFFIC_FOV_DEG[0]).ln());
     [(lo + 0.16 * (hi - lo)).exp(), (lo + 0.84 * (hi - lo)).exp()]
 }

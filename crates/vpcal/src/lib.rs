@@ -18,6 +18,7 @@
 
 pub mod aggregate;
 pub mod detector;
+pub mod kitti;
 pub mod model;
 pub mod output;
 pub mod overlay;

@@ -1,9 +1,10 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
-//! End-to-end tests of `vpcal train` and `vpcal predict` on the toy data (no dataset needed).
+//! End-to-end tests of `vpcal train` and `vpcal predict` on the toy data (no dataset needed),
+//! and of `vpcal eval kitti` on real vehicles (skipped without the data).
 
 use crate::common;
 
-use common::{read_json, text, vpcal};
+use common::{read_json, real_data, stdout, text, vpcal};
 
 #[test]
 fn train_resume_and_predict_on_toy_data() {
@@ -129,4 +130,30 @@ fn train_resume_and_predict_on_toy_data() {
         "{}",
         text(&o)
     );
+}
+
+/// Real KITTI vehicles with exact VPs: the per-vehicle measurements run end to end, and the
+/// edgelet VP2 keeps what it was measured at (`vpcal eval kitti --data
+/// $VPCAL_DATA/real/kitti_object --json`: 25 clean vehicles, 17 with enough edgelets, median
+/// 1.63°, 90th percentile 4.86°; the bundled network's VP2 4.51° / 10.3°).
+#[test]
+fn kitti_per_vehicle_direction_errors() {
+    let Some(dir) = real_data("real/kitti_object") else {
+        return;
+    };
+    let o = vpcal(&["eval", "kitti", "--data", dir.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let clean = &v["clean"];
+    assert_eq!(clean["vehicles"], 25);
+    let edge = &clean["edgelet_vp2"];
+    assert_eq!(edge["n"], 17);
+    assert!(edge["median_deg"].as_f64().unwrap() < 2.0, "{edge}");
+    assert!(edge["p90_deg"].as_f64().unwrap() < 6.0, "{edge}");
+    // The constant guess is measured too, and beats today's network on VP1 (issue 18).
+    assert!(clean["pp_vp1"]["median_deg"].as_f64().unwrap() < 3.0);
+    // Bad input names the file.
+    let o = vpcal(&["eval", "kitti", "--data", "/nonexistent"]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("vp_gt.json"), "{}", text(&o));
 }

@@ -10,7 +10,9 @@
 pub mod edgelets;
 pub mod reference;
 pub mod robust;
+pub mod sizes;
 pub mod tracks;
+pub mod vehicle_vp;
 
 use crate::point::{BoxPx, Point2};
 

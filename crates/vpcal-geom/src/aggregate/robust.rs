@@ -58,6 +58,11 @@
 //!    (`scripts/horizon_vs_boxes.py`); a tighter 10 % also refused a real residential-street
 //!    clip with a plausible horizon (motion boxes of distant cars and foliage near it).
 //!
+//! 8. **Vehicles grow away from the horizon** ([`super::sizes`]): an estimate whose horizon
+//!    the boxes' sizes contradict (they do not grow with the distance below it) is reported
+//!    as not enough evidence: near-top-down views, where the VPs are near infinity and the
+//!    focal length cannot be observed, end here.
+//!
 //! On the 12 BrnoCompSpeed training videos this is measured against the reference rule by
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
@@ -69,6 +74,27 @@ use crate::camera::Calibration;
 use crate::point::{BoxPx, Line, Point2};
 use crate::solve::{nelder_mead, percentile, sd, SplitMix};
 
+/// Horizontal fields of view of traffic cameras, degrees: from a telephoto view far along a
+/// motorway (15°) to a wide-angle view of a junction (90°). The focal-length prior comes from
+/// this range, not from any dataset's cameras.
+pub const TRAFFIC_FOV_DEG: [f64; 2] = [15.0, 90.0];
+
+/// The focal length of a horizontal field of view, in image widths: `0.5 / tan(fov / 2)`.
+pub fn focal_widths(fov_deg: f64) -> f64 {
+    0.5 / (fov_deg.to_radians() / 2.0).tan()
+}
+
+/// The focal-length prior as `(median, sd of ln f)` in image widths: a focal length uniform
+/// in `ln f` over [`TRAFFIC_FOV_DEG`] has its median at the geometric mean of the range's
+/// ends (1.38 widths, a 40° view) and a standard deviation of `ln(range) / sqrt(12)` (0.59).
+pub fn physical_focal_prior() -> (f64, f64) {
+    let (long, wide) = (
+        focal_widths(TRAFFIC_FOV_DEG[0]),
+        focal_widths(TRAFFIC_FOV_DEG[1]),
+    );
+    ((long * wide).sqrt(), (long / wide).ln() / 12f64.sqrt())
+}
+
 /// Settings of the robust aggregation; `Default` is what vpcal uses.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RobustOptions {
@@ -76,7 +102,8 @@ pub struct RobustOptions {
     pub min_score: f64,
     /// Image width and height in pixels; default: twice the principal point.
     pub image_size: Option<[f64; 2]>,
-    /// Median of the focal-length prior, as a multiple of the image width (1.5: a 37° view).
+    /// Median of the focal-length prior, as a multiple of the image width (default: from
+    /// [`physical_focal_prior`]).
     pub focal_prior_ratio: f64,
     /// Standard deviation of the focal-length prior in `ln f`.
     pub focal_prior_sigma_log: f64,
@@ -159,11 +186,12 @@ pub struct RobustOptions {
 
 impl Default for RobustOptions {
     fn default() -> Self {
+        let (focal_prior_ratio, focal_prior_sigma_log) = physical_focal_prior();
         RobustOptions {
             min_score: 0.1,
             image_size: None,
-            focal_prior_ratio: 1.5,
-            focal_prior_sigma_log: 0.3,
+            focal_prior_ratio,
+            focal_prior_sigma_log,
             roll_prior_sigma_deg: 1.0,
             ray_bias_prior_sigma_deg: 2.0,
             ray_scale_deg: 1.0,
@@ -248,6 +276,10 @@ pub struct Evidence {
     /// of its VP2 from the principal point in image widths (the focal length's two gates).
     pub edgelet_focal_log_spread: Option<f64>,
     pub edgelet_vp2_widths: Option<f64>,
+    /// How the vehicles' box sizes grow with their distance below the estimated horizon (the
+    /// power of a log-log fit; 1 when they agree, see `super::sizes`); `None` with too few
+    /// boxes.
+    pub size_slope: Option<f64>,
 }
 
 /// The spread of the estimate under resampling of the vehicles.
@@ -306,6 +338,8 @@ struct Prepared {
     weight: Vec<f64>,
     /// VP1-line weight factor from the decoder spread.
     spread1: Vec<f64>,
+    /// The boxes.
+    boxes: Vec<BoxPx>,
     repeated: usize,
 }
 
@@ -334,6 +368,7 @@ impl Prepared {
             vp2: pick(&self.vp2),
             weight,
             spread1: pickf(&self.spread1),
+            boxes: idx.iter().map(|&i| self.boxes[i]).collect(),
             repeated: self.repeated,
         }
     }
@@ -500,6 +535,7 @@ fn prepare(pairs: &[VehicleVps], opts: &RobustOptions, image_h: f64) -> Prepared
         vp2: Vec::with_capacity(rows.len()),
         weight: Vec::with_capacity(rows.len()),
         spread1: Vec::with_capacity(rows.len()),
+        boxes: boxes.clone(),
         repeated: counts
             .iter()
             .filter(|c| **c as f64 > opts.duplicate_keep)
@@ -1256,6 +1292,26 @@ pub fn aggregate_with_edgelets(
             100.0 * opts.max_above_horizon
         )));
     }
+    // The vehicles' sizes must grow away from the horizon (`super::sizes`): a camera looking
+    // almost straight down sees them all alike, whatever horizon the VPs gave.
+    let sizes = super::sizes::size_slope(
+        &full.boxes,
+        &full.weight,
+        calibration.horizon,
+        width,
+        height,
+    );
+    if let Some(s) = sizes.filter(|s| s.slope < super::sizes::MIN_SIZE_SLOPE) {
+        return Err(not_enough(format!(
+            "the vehicles' sizes contradict the estimated horizon: they grow with the distance \
+             below it as its power {:.2} (about 1 expected, at least {:.1} allowed; {} boxes); \
+             a camera looking almost straight down, whose focal length and horizon cannot be \
+             observed, or per-vehicle VPs that do not agree on a camera",
+            s.slope,
+            super::sizes::MIN_SIZE_SLOPE,
+            s.boxes
+        )));
+    }
     let s2 = opts.ray_scale_deg.to_radians();
     let vp2_inliers = full
         .centre
@@ -1292,6 +1348,7 @@ pub fn aggregate_with_edgelets(
         edgelet_roll_sd_deg: edge_fit.map(|e| e.roll_sd_deg),
         edgelet_focal_log_spread: edge_fit.map(|e| e.focal_log_spread()),
         edgelet_vp2_widths: edge_fit.map(|e| (e.vp2 - pp).norm() / width),
+        size_slope: sizes.map(|s| s.slope),
     };
     let confidence = (opts.bootstrap > 0).then(|| {
         let data_only = Vp2Model {

@@ -46,6 +46,10 @@ pub enum EvalCommand {
     /// vehicle tracks ("cars") of RESULTS/<video>/system_<name>.json measured with the file's
     /// camera and scale, matched to the ground-truth cars of DATASET/<video>/gt_data.pkl.
     Speed(SpeedArgs),
+    /// Per-vehicle VP direction errors on real KITTI vehicles with exact VPs
+    /// (DATA/vp_gt.json): the network, the guess "VP1 at the principal point", VP2 from
+    /// edgelets.
+    Kitti(super::kitti::KittiArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -169,6 +173,7 @@ pub fn run(cmd: EvalCommand) -> Result<()> {
         EvalCommand::Bcp(args) => run_bcp(&args),
         EvalCommand::Vpout(args) => run_vpout(&args),
         EvalCommand::Speed(args) => run_speed(&args),
+        EvalCommand::Kitti(args) => super::kitti::run(args),
     }
 }
 

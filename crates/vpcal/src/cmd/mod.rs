@@ -9,6 +9,7 @@ pub mod data;
 pub mod demo;
 pub mod detect;
 pub mod eval;
+pub mod kitti;
 pub mod measure;
 pub mod predict;
 pub mod synth;

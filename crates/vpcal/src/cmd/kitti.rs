@@ -1,0 +1,123 @@
+//! `vpcal eval kitti`: per-vehicle VP direction errors on real KITTI vehicles with exact truth
+//! (the network's VP1 and VP2, the "VP1 at the principal point" guess, VP2 from edgelets).
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use vpcal::kitti::{self, EdgeletRule, ErrorSummary, VehicleResult};
+
+#[derive(Debug, clap::Args)]
+pub struct KittiArgs {
+    /// The folder holding `vp_gt.json` and `image_2/` (`$VPCAL_DATA/real/kitti_object`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// VP network weights; default: the bundled model.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Also measure occluded, truncated and small vehicles (summarised apart).
+    #[arg(long)]
+    pub all: bool,
+    /// Write every vehicle's measurements, with all the edgelets found in its box, as JSON.
+    #[arg(long, value_name = "FILE")]
+    pub vehicles: Option<PathBuf>,
+    /// Print machine-readable JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// The per-vehicle edgelet VP2 lies at least this many box diagonals from the box centre.
+    #[arg(long, value_name = "DIAGONALS", default_value_t = kitti::MIN_VP_DISTANCE_DIAGONALS)]
+    pub edgelet_reach: f64,
+    /// Device: `cpu`, or `wgpu` in builds with the `wgpu` feature.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+}
+
+#[derive(Debug, serde::Serialize)]
+struct Subset {
+    vehicles: usize,
+    network_vp1: Option<ErrorSummary>,
+    network_vp2: Option<ErrorSummary>,
+    pp_vp1: Option<ErrorSummary>,
+    edgelet_vp2: Option<ErrorSummary>,
+}
+
+fn subset(results: &[&VehicleResult]) -> Subset {
+    let s = |f: fn(&VehicleResult) -> Option<f64>| kitti::summarize(results.iter().map(|r| f(r)));
+    Subset {
+        vehicles: results.len(),
+        network_vp1: s(|r| r.network_vp1_deg),
+        network_vp2: s(|r| r.network_vp2_deg),
+        pp_vp1: s(|r| r.pp_vp1_deg),
+        edgelet_vp2: s(|r| r.edgelet_vp2_deg),
+    }
+}
+
+pub fn run(a: KittiArgs) -> Result<()> {
+    if let Some(path) = &a.vehicles {
+        vpcal::output::check_destination("--vehicles", path)?;
+    }
+    let frames = kitti::read_truth(&a.data)?;
+    let (net, model) = vpcal::model::load_model(a.model.as_deref(), &a.device)?;
+    if a.edgelet_reach.is_nan() || a.edgelet_reach <= 0.0 {
+        return Err(crate::cmd::UsageError(format!(
+            "--edgelet-reach {}: expected a positive number of box diagonals",
+            a.edgelet_reach
+        ))
+        .into());
+    }
+    let rule = EdgeletRule {
+        min_vp_distance_diagonals: a.edgelet_reach,
+        ..EdgeletRule::default()
+    };
+    let results = kitti::evaluate(&frames, &net, &rule, !a.all, a.vehicles.is_some())?;
+    let clean: Vec<&VehicleResult> = results.iter().filter(|r| r.clean).collect();
+    let rest: Vec<&VehicleResult> = results.iter().filter(|r| !r.clean).collect();
+    let clean_s = subset(&clean);
+    let rest_s = a.all.then(|| subset(&rest));
+    if let Some(path) = &a.vehicles {
+        let json = serde_json::to_string_pretty(&results)?;
+        vpcal_formats::fs::write_atomic(path, json.as_bytes())?;
+    }
+    if a.json {
+        let report = serde_json::json!({
+            "model": model,
+            "edgelet_rule": rule,
+            "clean": clean_s,
+            "others": rest_s,
+        });
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!("model: {model}");
+    println!(
+        "direction errors at the box centre, degrees (median / 90th percentile, vehicles with a value)"
+    );
+    let fmt = |s: &Option<ErrorSummary>| match s {
+        Some(s) => format!("{:>6.2} / {:>6.2} ({:>2})", s.median_deg, s.p90_deg, s.n),
+        None => format!("{:>22}", "-"),
+    };
+    println!(
+        "{:<34} {:>22} {:>22} {:>22} {:>22}",
+        "vehicles", "network VP1", "network VP2", "VP1 = principal point", "edgelet VP2"
+    );
+    let mut rows = vec![(
+        format!(
+            "clean (unoccluded, untruncated, >= {} px): {}",
+            kitti::CLEAN_MIN_HEIGHT_PX,
+            clean_s.vehicles
+        ),
+        &clean_s,
+    )];
+    if let Some(r) = &rest_s {
+        rows.push((format!("others: {}", r.vehicles), r));
+    }
+    for (label, s) in rows {
+        println!(
+            "{label:<34} {} {} {} {}",
+            fmt(&s.network_vp1),
+            fmt(&s.network_vp2),
+            fmt(&s.pp_vp1),
+            fmt(&s.edgelet_vp2)
+        );
+    }
+    Ok(())
+}
