@@ -62,6 +62,7 @@ pub mod realbg;
 pub mod scene;
 pub mod shade;
 pub mod sheet;
+pub mod speed_truth;
 pub mod truth;
 pub mod vehicle;
 pub mod view;

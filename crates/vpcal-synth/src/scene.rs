@@ -8,12 +8,14 @@
 //! OUT/dataset/<name>/screen.png           frame 0
 //! OUT/dataset/<name>/overlay.png          frame 0 with the true horizon, VPs and 3D boxes
 //! OUT/dataset/<name>/gt_data.json         {"fps", "distanceMeasurement": [{p1, p2, distance, toVP1}],
-//!                                          "measurementLines": [], "laneDivLines": [],
-//!                                          "invalidLanes": [], "cars": []}
+//!                                          "measurementLines", "laneDivLines", "invalidLanes": [],
+//!                                          "cars": [{carId, speed, valid, laneIndex, intersections}]}
+//!                                          (speed truth: see `speed_truth`; empty on curves)
 //! OUT/dataset/<name>/detections.csv       frame,x0,y0,x1,y1,score (true boxes, score 1.0)
 //! OUT/dataset/<name>/vehicles.jsonl       per frame and vehicle: box, bb3d, vp1, vp2, pose, ...
 //! OUT/dataset/<name>/camera.json          K, R, position, height, vp1, vp2, vp3, horizon, ...
-//! OUT/results/<name>/system_groundtruth.json  {"camera_calibration": {vp1, vp2, pp, scale}, "cars": []}
+//! OUT/results/<name>/system_groundtruth.json  {"camera_calibration": {vp1, vp2, pp, scale},
+//!                                          "cars": true tracks (contact points of the true boxes)}
 //! ```
 //! All image coordinates use the crate's pixel convention (pixel (i, j) covers
 //! [i, i+1) x [j, j+1)); the principal point written is the true one (the image centre).
@@ -33,6 +35,7 @@ use crate::math::{hull, rng_for, RngExt, V3};
 use crate::mesh::{Mesh, Pose};
 use crate::raster::{Backdrop, Target, NEAR_M};
 use crate::shade::Lighting;
+use crate::speed_truth::{SpeedGeometry, SpeedTruth};
 use crate::vehicle::{project_box, VehicleKind, VehicleModel, VehicleSpec};
 use crate::view::clear_view;
 use crate::world::{generate_world, Ground, LayoutKind, World, WorldParams};
@@ -1152,23 +1155,10 @@ pub fn render_scene(
             attempts: 1,
         })?;
     let measurements = distance_measurements(st, 40);
-    // Ground-truth files first (small).
-    let gt = serde_json::json!({
-        "fps": spec.fps,
-        "distanceMeasurement": measurements,
-        "measurementLines": [],
-        "laneDivLines": [],
-        "invalidLanes": [],
-        "cars": [],
-    });
-    let p = ds.join("gt_data.json");
-    write_atomic(&p, &json_bytes(&gt, &p)?)?;
-    let sys = serde_json::json!({
-        "camera_calibration": {"vp1": vp1, "vp2": vp2, "pp": cam.pp, "scale": scale},
-        "cars": [],
-    });
-    let p = res.join("system_groundtruth.json");
-    write_atomic(&p, &json_bytes(&sys, &p)?)?;
+    // The speed ground truth needs the whole video: gt_data.json and system_groundtruth.json
+    // are written after the frames.
+    let speed_geometry = SpeedGeometry::new(&st.world, &cam);
+    let mut speed_truth = SpeedTruth::new();
     let (yaw, pitch, roll) = cam.angles();
     let camera_json = serde_json::json!({
         "scene": spec.name,
@@ -1231,15 +1221,10 @@ pub fn render_scene(
         if let Some(v) = video.as_mut() {
             v.push(&frame.image)?;
         }
+        speed_truth.push(&frame.vehicles);
         for v in &frame.vehicles {
             let b = v.box_clipped;
-            let full = (v.box2d[2] - v.box2d[0]) * (v.box2d[3] - v.box2d[1]);
-            let inside = (b[2] - b[0]) * (b[3] - b[1]) / full.max(1e-9);
-            if v.visible_fraction >= 0.3
-                && inside >= 0.6
-                && (b[2] - b[0]) >= 8.0
-                && (b[3] - b[1]) >= 8.0
-            {
+            if crate::speed_truth::detectable(v) {
                 dets.push_str(&format!(
                     "{k},{:.2},{:.2},{:.2},{:.2},1.0\n",
                     b[0], b[1], b[2], b[3]
@@ -1260,6 +1245,30 @@ pub fn render_scene(
     }
     write_atomic(&ds.join("detections.csv"), dets.as_bytes())?;
     write_atomic(&ds.join("vehicles.jsonl"), jsonl.as_bytes())?;
+    let (lines, lanes, cars) = match &speed_geometry {
+        Some(g) => (
+            g.measurement_lines.clone(),
+            g.lane_div_lines.clone(),
+            speed_truth.cars(g, spec.fps),
+        ),
+        None => (vec![], vec![], vec![]),
+    };
+    let gt = serde_json::json!({
+        "fps": spec.fps,
+        "distanceMeasurement": measurements,
+        "measurementLines": lines,
+        "laneDivLines": lanes,
+        "invalidLanes": [],
+        "cars": cars,
+    });
+    let p = ds.join("gt_data.json");
+    write_atomic(&p, &json_bytes(&gt, &p)?)?;
+    let sys = serde_json::json!({
+        "camera_calibration": {"vp1": vp1, "vp2": vp2, "pp": cam.pp, "scale": scale},
+        "cars": speed_truth.tracks(),
+    });
+    let p = res.join("system_groundtruth.json");
+    write_atomic(&p, &json_bytes(&sys, &p)?)?;
     Ok(SceneSummary {
         name: spec.name.clone(),
         frames: spec.frames,

@@ -233,8 +233,12 @@ fn bcs_files_score_zero_with_the_truth_and_not_with_a_wrong_focal() {
     let (tmp, ds) = write_scene(&small_scene(LayoutKind::Highway, 21, 1));
     // gt_data.json and system_groundtruth.json in the BrnoCompSpeed schema.
     let gt = read_json(&ds.join("gt_data.json"));
-    for key in ["measurementLines", "laneDivLines", "invalidLanes", "cars"] {
+    // One frame: the speed lines, but no crossing yet.
+    for key in ["invalidLanes", "cars"] {
         assert!(gt[key].as_array().is_some_and(|a| a.is_empty()), "{key}");
+    }
+    for key in ["measurementLines", "laneDivLines"] {
+        assert!(gt[key].as_array().is_some_and(|a| a.len() >= 2), "{key}");
     }
     assert_eq!(gt["fps"].as_f64(), Some(25.0));
     let dm = gt["distanceMeasurement"].as_array().unwrap();
@@ -484,5 +488,49 @@ fn a_source_spec_selects_seed_length_and_split() {
             .unwrap_err()
             .to_string();
         assert!(err.contains(bad), "{err}");
+    }
+}
+
+/// The speed truth of a highway scene: `vpcal eval speed`'s protocol (vpcal-formats) on the
+/// true tracks (system_groundtruth.json: contact points of the true boxes) with the true
+/// camera finds nearly every valid car at nearly its true speed.
+#[test]
+fn true_tracks_with_the_true_camera_measure_the_true_speeds() {
+    use vpcal_formats::bcs::{read_gt, read_system};
+    use vpcal_formats::bcs_speed::{evaluate_video, Road, SpeedMode};
+    let spec = SceneSpec {
+        fps: 25.0,
+        ..small_scene(LayoutKind::Highway, 4, 120)
+    };
+    let (tmp, ds) = write_scene(&spec);
+    let gt = read_gt(&ds).unwrap();
+    assert_eq!(gt.measurement_lines.len(), 3);
+    assert!(gt.lane_div_lines.len() >= 4, "{}", gt.lane_div_lines.len());
+    let valid: Vec<_> = gt.cars.iter().filter(|c| c.valid).collect();
+    assert!(valid.len() >= 3, "only {} valid cars", valid.len());
+    for c in &gt.cars {
+        // The last listed crossing is the one of line 0 (what the evaluation matches).
+        assert_eq!(c.intersections.last().unwrap().0, 0, "{c:?}");
+        assert!(c.speed_kmh > 0.0 && c.speed_kmh < 200.0, "{c:?}");
+    }
+    for c in &valid {
+        assert_eq!(c.intersections.len(), 3, "{c:?}");
+        assert!(!c.lane_index.is_empty());
+    }
+    let sys = read_system(&tmp.path().join("results/t_highway/system_groundtruth.json")).unwrap();
+    assert!(!sys.cars.is_empty());
+    let c = sys.calibration;
+    let calib = Calibration::from_vps(c.vp1, c.vp2, c.pp).unwrap();
+    let road = Road {
+        calib: &calib,
+        scale: c.scale,
+    };
+    let image = [f64::from(spec.width), f64::from(spec.height)];
+    for mode in [SpeedMode::Median, SpeedMode::Full] {
+        let v = evaluate_video(&gt, &sys.cars, &road, mode, image).unwrap();
+        let recall = v.recall.unwrap();
+        let median = v.abs_kmh.as_ref().unwrap().median;
+        assert!(recall >= 0.9, "{mode:?}: recall {recall}: {v:?}");
+        assert!(median < 1.5, "{mode:?}: median error {median} km/h: {v:?}");
     }
 }
