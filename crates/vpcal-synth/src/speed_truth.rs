@@ -6,7 +6,7 @@
 //! - The road measured is the scene's straight road: the road of a highway, road `a` of an
 //!   intersection, the access road of a parking lot. A curved road has no straight lane
 //!   dividers in the image, so a curve scene gets no speed truth (empty lists).
-//! - [`SpeedGeometry::measurement_lines`]: 3 lines across the whole road (shoulders included)
+//! - [`SpeedGeometry::measurement_lines`]: 3 lines across the road
 //!   at 15 %, 50 % and 85 % of the stretch of road whose centre line is seen well inside the
 //!   image (at least 8 % of the image size from its border, within 150 m of the camera).
 //! - [`SpeedGeometry::lane_div_lines`]: one line per lane boundary, sorted across the road;
@@ -106,18 +106,30 @@ impl SpeedGeometry {
             return None;
         }
         let xs = &road.xs;
+        // Road points well in front of the camera only (a point beside or behind it would
+        // project to the wrong side).
         let project = |s: f64, t: f64| {
             let p = road.pose(s, t);
-            cam.project(V3::new(p.x, p.y, 0.0))
+            let g = V3::new(p.x, p.y, 0.0);
+            if cam.to_camera(g).z < 1.0 {
+                return None;
+            }
+            cam.project(g)
         };
+        // Any two points of a line on the road give its image line: the cross-section
+        // through two points near the (seen) centre line; a lane boundary through the first
+        // pair of seen stretch's points in front of the camera.
         let mut measurement_lines = Vec::new();
         for f in [0.15, 0.5, 0.85] {
             let s = lo + f * (hi - lo);
-            measurement_lines.push(line_through(
-                project(s, -xs.half_right())?,
-                project(s, xs.half_left())?,
-            )?);
+            measurement_lines.push(line_through(project(s, -1.0)?, project(s, 1.0)?)?);
         }
+        let mid = (lo + hi) / 2.0;
+        let boundary = |t: f64| {
+            [(mid, hi), (mid, lo), (lo, hi)]
+                .into_iter()
+                .find_map(|(a, b)| line_through(project(a, t)?, project(b, t)?))
+        };
         // Lane boundaries, right edge to left edge (t grows to the left).
         let mut ts = vec![-xs.half_right()];
         for k in (0..xs.lanes_right).rev() {
@@ -129,7 +141,7 @@ impl SpeedGeometry {
         ts.push(xs.half_left());
         let mut lane_div_lines = Vec::new();
         for t in ts {
-            lane_div_lines.push(line_through(project(lo, t)?, project(hi, t)?)?);
+            lane_div_lines.push(boundary(t)?);
         }
         let heading = road.pose(0.0, 0.0).heading;
         Some(SpeedGeometry {

@@ -24,6 +24,7 @@ pub mod output;
 pub mod overlay;
 pub mod pipeline;
 pub mod progress;
+pub mod tracks;
 
 pub use pipeline::{calibrate, run_pipeline, run_pipeline_on, PipelineConfig, PipelineOutput};
 pub use vpcal_formats::calib::CalibrationFile;

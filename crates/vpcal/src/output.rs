@@ -1,5 +1,5 @@
 //! What a calibration run writes: the calibration file, the BrnoCompSpeed system file, the
-//! per-vehicle records; and the checks that let a run fail before it starts, not after.
+//! per-vehicle records, the vehicle tracks; and the checks that let a run fail before it starts, not after.
 
 use std::path::Path;
 
@@ -13,6 +13,7 @@ use vpcal_video::{SourceKind, Start};
 
 use crate::aggregate::Aggregated;
 use crate::pipeline::{PipelineConfig, PipelineOutput};
+use crate::tracks::VehicleTrack;
 
 /// How calibration files name a kind of input.
 pub fn kind_name(kind: SourceKind) -> &'static str {
@@ -132,6 +133,151 @@ pub fn write_bcs_system(path: &Path, cal: &Calibration, scale: Option<f64>) -> R
         scale: scale.unwrap_or(1.0),
     });
     write_system(path, &system)?;
+    Ok(())
+}
+
+/// Write `cal` as a BrnoCompSpeed system file with `tracks` as its `cars` (the unclipped
+/// contact points, image pixels; scale 1 without a metric scale).
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_bcs_system_with_tracks(
+    path: &Path,
+    cal: &Calibration,
+    scale: Option<f64>,
+    tracks: &[VehicleTrack],
+) -> Result<()> {
+    let mut system = SystemFile::new(SystemCalibration {
+        vp1: cal.vp1,
+        vp2: cal.vp2,
+        pp: cal.pp,
+        scale: scale.unwrap_or(1.0),
+    });
+    system.cars = tracks
+        .iter()
+        .map(VehicleTrack::to_system_car)
+        .filter(|c| !c.frames.is_empty())
+        .collect();
+    write_system(path, &system)?;
+    Ok(())
+}
+
+/// What a tracks file says besides the tracks.
+#[derive(Debug, Clone)]
+pub struct TracksHeader {
+    pub input: String,
+    pub fps: Option<f64>,
+    pub size: (u32, u32),
+    /// Metres per road unit of the calibration the road points use.
+    pub scale_m_per_unit: Option<f64>,
+    pub window_points: usize,
+    /// Why speeds are missing, when they are.
+    pub note: Option<String>,
+}
+
+/// A finite number, or JSON null.
+fn num(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// The tracks as JSON (`vpcal-tracks/1`, strict: non-finite numbers are null).
+pub fn tracks_json(header: &TracksHeader, tracks: &[VehicleTrack]) -> Value {
+    let list: Vec<Value> = tracks
+        .iter()
+        .map(|t| {
+            let road = |k: usize| -> Value {
+                if t.points.iter().all(|p| p.road_m.is_none()) {
+                    return Value::Null;
+                }
+                Value::Array(
+                    t.points
+                        .iter()
+                        .map(|p| p.road_m.map_or(Value::Null, |q| num(q[k])))
+                        .collect(),
+                )
+            };
+            json!({
+                "id": t.id,
+                "frames": t.points.iter().map(|p| p.frame).collect::<Vec<_>>(),
+                "time_s": t.points.iter().map(|p| num(p.time_s)).collect::<Vec<_>>(),
+                "x_px": t.points.iter().map(|p| num(p.image.x)).collect::<Vec<_>>(),
+                "y_px": t.points.iter().map(|p| num(p.image.y)).collect::<Vec<_>>(),
+                "clipped": t.points.iter().map(|p| p.clipped).collect::<Vec<_>>(),
+                "road_x_m": road(0),
+                "road_y_m": road(1),
+                "speed_kmh": t.speed.map_or(Value::Null, |s| num(s.kmh)),
+                "speed_uncertainty_kmh": t.speed.map_or(Value::Null, |s| num(s.uncertainty_kmh)),
+                "speed_fit_kmh": t.speed.map_or(Value::Null, |s| num(s.fit_kmh)),
+                "speed_windows": t.speed.map_or(0, |s| s.windows),
+                "lateral_m": t.lateral_m.map_or(Value::Null, num),
+            })
+        })
+        .collect();
+    json!({
+        "format": "vpcal-tracks/1",
+        "input": header.input,
+        "fps": header.fps.map_or(Value::Null, num),
+        "width": header.size.0,
+        "height": header.size.1,
+        "scale_m_per_unit": header.scale_m_per_unit.map_or(Value::Null, num),
+        "speed_window_points": header.window_points,
+        "note": header.note,
+        "tracks": list,
+    })
+}
+
+/// The tracks as CSV: one row per track point, the track's speed columns repeated on each.
+pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
+    let opt = |v: Option<f64>| {
+        v.filter(|x| x.is_finite())
+            .map_or(String::new(), |x| format!("{x}"))
+    };
+    let mut s = String::from(
+        "id,frame,time_s,x_px,y_px,clipped,road_x_m,road_y_m,speed_kmh,speed_uncertainty_kmh,\
+         speed_fit_kmh,lateral_m\n",
+    );
+    for t in tracks {
+        for p in &t.points {
+            s.push_str(&format!(
+                "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                t.id,
+                p.frame,
+                opt(Some(p.time_s)),
+                opt(Some(p.image.x)),
+                opt(Some(p.image.y)),
+                u8::from(p.clipped),
+                opt(p.road_m.map(|q| q[0])),
+                opt(p.road_m.map(|q| q[1])),
+                opt(t.speed.map(|v| v.kmh)),
+                opt(t.speed.map(|v| v.uncertainty_kmh)),
+                opt(t.speed.map(|v| v.fit_kmh)),
+                opt(t.lateral_m),
+            ));
+        }
+    }
+    s
+}
+
+/// Write the tracks to `path`: CSV when it ends in `.csv`, else JSON (atomically).
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_tracks(path: &Path, header: &TracksHeader, tracks: &[VehicleTrack]) -> Result<()> {
+    let csv = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    let bytes = if csv {
+        tracks_csv(tracks).into_bytes()
+    } else {
+        let mut b = serde_json::to_vec_pretty(&tracks_json(header, tracks))?;
+        b.push(b'\n');
+        b
+    };
+    vpcal_formats::fs::write_atomic(path, &bytes)?;
     Ok(())
 }
 

@@ -205,6 +205,9 @@ pub struct VehicleRecord {
     pub score: f32,
     /// The box frame of the crop (clamped integer box), frame pixels.
     pub crop_box: BoxPx,
+    /// The detector's box as it gave it (sub-pixel, not rounded to the crop's integer box),
+    /// frame pixels: what tracks and speeds use.
+    pub det_box: BoxPx,
     /// The decoded network output, box frame.
     pub prediction: VpPrediction,
     /// VP1 and VP2 in frame pixels.
@@ -344,8 +347,8 @@ impl EdgeletBudget {
     }
 }
 
-/// A crop waiting for its batch: frame, score, crop box, edgelets in the box.
-type Pending = (u64, f32, BoxPx, Vec<Edgelet>);
+/// A crop waiting for its batch: frame, score, crop box, detector box, edgelets in the box.
+type Pending = (u64, f32, BoxPx, BoxPx, Vec<Edgelet>);
 
 /// Everything after the detector: filter, crops, edgelets, batched network, records.
 struct Stages<'a> {
@@ -432,8 +435,9 @@ impl<'a> Stages<'a> {
             } else {
                 edgelets_in_box(&frame.image, &bp, &self.edgelet_options)
             };
+            let kept = &filtered.kept[src];
             self.pending_meta
-                .push((frame.index, filtered.kept[src].score, bp, edgelets));
+                .push((frame.index, kept.score, bp, kept.bbox, edgelets));
             self.stats.crops += 1;
             if self.pending_meta.len() >= self.config.batch {
                 self.flush()?;
@@ -448,7 +452,9 @@ impl<'a> Stages<'a> {
             return Ok(());
         }
         let preds = self.net.predict_prepared(&self.pending)?;
-        for ((frame, score, crop_box, edgelets), p) in self.pending_meta.drain(..).zip(preds) {
+        for ((frame, score, crop_box, det_box, edgelets), p) in
+            self.pending_meta.drain(..).zip(preds)
+        {
             let prediction = p.vp;
             let vp1 = crop_box.frame_from_box(prediction.vp1);
             let vp2 = crop_box.frame_from_box(prediction.vp2);
@@ -465,6 +471,7 @@ impl<'a> Stages<'a> {
                 frame,
                 score,
                 crop_box,
+                det_box,
                 vp1,
                 vp2,
                 prediction,

@@ -8,10 +8,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Result};
 use vpcal::aggregate::{Aggregated, Method};
 use vpcal::detector::{DetectorChoice, DetectorSettings};
+use vpcal::output::TracksHeader;
 use vpcal::output::{self, check_destination};
 use vpcal::overlay;
 use vpcal::pipeline::{open_input, PipelineConfig, PipelineOutput, PrincipalPoint};
+use vpcal::tracks::{build_tracks, summary, TrackSettings, VehicleTrack};
+use vpcal_formats::calib::ScaleReference;
 use vpcal_geom::camera::Calibration;
+use vpcal_geom::Point2;
 use vpcal_video::{SourceOptions, Start};
 
 use super::{Exit, UsageError};
@@ -31,6 +35,22 @@ pub struct Args {
     /// Also write the per-vehicle records (deep_vp's `VPout` JSON; non-finite numbers as null).
     #[arg(long, value_name = "FILE")]
     pub vehicles: Option<PathBuf>,
+    /// Also write the vehicle tracks: `.csv` (one row per track point: id, frame, time_s,
+    /// x_px, y_px (the box's bottom centre, where the vehicle meets the road), clipped,
+    /// road_x_m, road_y_m, and the track's speed_kmh, speed_uncertainty_kmh, speed_fit_kmh,
+    /// lateral_m) or JSON (any other name; vpcal-tracks/1, the same fields per track). Road
+    /// points and speeds need a metric scale (--scale-points/--scale-distance). Needs
+    /// consecutive frames: a video, or an image folder with --fps.
+    #[arg(long, value_name = "FILE")]
+    pub tracks: Option<PathBuf>,
+    /// Two road points a known distance apart, pixels x1,y1,x2,y2 (as `vpcal scale
+    /// --points`): gives the calibration its metric scale, the tracks their speeds, the
+    /// BrnoCompSpeed file its scale.
+    #[arg(long, value_name = "X1,Y1,X2,Y2", value_parser = parse_points, allow_hyphen_values = true, requires = "scale_distance")]
+    pub scale_points: Option<[f64; 4]>,
+    /// The distance between --scale-points on the road, metres.
+    #[arg(long, value_name = "M", requires = "scale_points")]
+    pub scale_distance: Option<f64>,
     /// Also write a frame with the horizon, vehicle VP directions and a road grid (PNG).
     #[arg(long, value_name = "PNG")]
     pub overlay: Option<PathBuf>,
@@ -236,6 +256,106 @@ impl PipelineArgs {
     }
 }
 
+fn parse_points(s: &str) -> Result<[f64; 4], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .ok_or_else(|| format!("expected x1,y1,x2,y2 (finite numbers), got {s:?}"))?;
+    match v[..] {
+        [a, b, c, d] => Ok([a, b, c, d]),
+        _ => Err(format!(
+            "expected 4 numbers x1,y1,x2,y2, got {} in {s:?}",
+            v.len()
+        )),
+    }
+}
+
+/// The metric scale of `cal` from --scale-points/--scale-distance, with its reference.
+fn known_scale(args: &Args, cal: &Calibration) -> Result<Option<(f64, ScaleReference)>> {
+    let (Some(p), Some(distance)) = (args.scale_points, args.scale_distance) else {
+        return Ok(None);
+    };
+    let (p1, p2) = (Point2::new(p[0], p[1]), Point2::new(p[2], p[3]));
+    for q in [p1, p2] {
+        if !cal.sees_road(q) {
+            bail!(
+                "--scale-points: pixel ({}, {}) is above the horizon of the calibration: it does \
+                 not see the road",
+                q.x,
+                q.y
+            );
+        }
+    }
+    let scale = cal.scale_from_distance(p1, p2, distance).ok_or_else(|| {
+        anyhow::anyhow!(
+            "--scale-points: the two pixels coincide on the road (or a ray misses the road plane)"
+        )
+    })?;
+    Ok(Some((
+        scale,
+        ScaleReference {
+            points: [[p1.x, p1.y], [p2.x, p2.y]],
+            distance_m: distance,
+        },
+    )))
+}
+
+/// The tracks of a run, and why they have no speeds when they have none.
+fn run_tracks(
+    out: &PipelineOutput,
+    road: Option<(&Calibration, f64)>,
+    calibrated: bool,
+) -> (Vec<VehicleTrack>, TracksHeader) {
+    let settings = TrackSettings::default();
+    let mut header = TracksHeader {
+        input: out.info.path.display().to_string(),
+        fps: out.info.fps.filter(|f| f.is_finite() && *f > 0.0),
+        size: (out.info.width, out.info.height),
+        scale_m_per_unit: road.map(|r| r.1),
+        window_points: settings.window_points,
+        note: None,
+    };
+    let Some(fps) = header.fps else {
+        header.note = Some(
+            "no frame rate: tracks need consecutive frames (a video, or an image folder with \
+             --fps)"
+                .to_string(),
+        );
+        return (Vec::new(), header);
+    };
+    if road.is_none() {
+        header.note = Some(if calibrated {
+            "no metric scale: tracks without road points and speeds (give --scale-points and \
+             --scale-distance)"
+                .to_string()
+        } else {
+            "no calibration: tracks without road points and speeds".to_string()
+        });
+    }
+    let tracks = build_tracks(
+        &out.records,
+        fps,
+        road,
+        (out.info.width, out.info.height),
+        &settings,
+    );
+    (tracks, header)
+}
+
+/// The one-line summary of the tracks.
+fn tracks_line(tracks: &[VehicleTrack], header: &TracksHeader) -> String {
+    let (n, with_speed, median) = summary(tracks);
+    let mut line = format!("tracks: {n}, {with_speed} with a speed");
+    if let Some(m) = median {
+        line.push_str(&format!(", median speed {m:.1} km/h"));
+    }
+    if let Some(note) = &header.note {
+        line.push_str(&format!(" ({note})"));
+    }
+    line
+}
+
 fn parse_start(s: &str) -> Result<Start, String> {
     s.parse::<Start>().map_err(|e| e.to_string())
 }
@@ -336,11 +456,20 @@ pub fn run(args: Args) -> Result<Exit> {
         ("--output", &args.output),
         ("--bcs-json", &args.bcs_json),
         ("--vehicles", &args.vehicles),
+        ("--tracks", &args.tracks),
         ("--overlay", &args.overlay),
         ("--opencv", &args.opencv),
     ] {
         if let Some(path) = path {
             check_destination(flag, path)?;
+        }
+    }
+    if let Some(d) = args.scale_distance {
+        if !(d.is_finite() && d > 0.0) {
+            return Err(UsageError(format!(
+                "--scale-distance {d}: expected a positive number of metres"
+            ))
+            .into());
         }
     }
     let config = args.pipeline.config()?;
@@ -354,14 +483,35 @@ pub fn run(args: Args) -> Result<Exit> {
     if let Some(path) = &args.vehicles {
         output::write_vehicles(path, &out)?;
     }
+    // The tracks' summary goes to stdout, unless stdout carries the calibration's JSON.
+    let say = |line: String| {
+        if args.json {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    };
     match result {
         Ok((cal, agg)) => {
-            let doc = output::calibration_file(&out, &config, &cal, &agg);
+            let mut doc = output::calibration_file(&out, &config, &cal, &agg);
+            let scale = known_scale(&args, &cal)?;
+            if let Some((s, reference)) = &scale {
+                doc.set_scale(*s, Some(reference.clone()))
+                    .map_err(anyhow::Error::msg)?;
+            }
+            let scale = scale.map(|(s, _)| s);
+            if args.tracks.is_some() || args.bcs_json.is_some() {
+                let (tracks, header) = run_tracks(&out, scale.map(|s| (&cal, s)), true);
+                if let Some(path) = &args.tracks {
+                    output::write_tracks(path, &header, &tracks)?;
+                }
+                if let Some(path) = &args.bcs_json {
+                    output::write_bcs_system_with_tracks(path, &cal, scale, &tracks)?;
+                }
+                say(tracks_line(&tracks, &header));
+            }
             if let Some(path) = &args.output {
                 doc.write(path)?;
-            }
-            if let Some(path) = &args.bcs_json {
-                output::write_bcs_system(path, &cal, None)?;
             }
             if let Some(path) = &args.opencv {
                 output::write_opencv_yaml(path, &doc)?;
@@ -382,6 +532,11 @@ pub fn run(args: Args) -> Result<Exit> {
             let doc = output::failure_file(&out, &config, format!("{e:#}"));
             if let Some(path) = &args.output {
                 doc.write(path)?;
+            }
+            if let Some(path) = &args.tracks {
+                let (tracks, header) = run_tracks(&out, None, false);
+                output::write_tracks(path, &header, &tracks)?;
+                say(tracks_line(&tracks, &header));
             }
             if let Some(path) = &args.overlay {
                 if let Some(picture) = &out.picture {
