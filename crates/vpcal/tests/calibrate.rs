@@ -507,3 +507,127 @@ fn demo_renders_calibrates_and_compares_with_the_truth() {
     assert_eq!(Some(cv.camera_matrix), doc.k);
     assert_eq!(cv.dist_coeffs, [0.0; 5]);
 }
+
+/// From frames to a speed table: a synthetic highway (frame folder at 25 frames/s, true
+/// boxes), `calibrate --tracks --bcs-json` with a scale from one taped distance, then
+/// `eval speed` against the scene's speed ground truth.
+#[test]
+fn calibrate_writes_tracks_and_bcs_cars_that_eval_speed_measures() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("scene");
+    let r = vpcal(&[
+        "synth",
+        "scene",
+        "--layout",
+        "highway",
+        "--frames",
+        "120",
+        "--frames-dir",
+        "--no-video",
+        "--width",
+        "480",
+        "--height",
+        "270",
+        "--seed",
+        "4",
+        "--out",
+        root.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", text(&r));
+    let ds = root.join("dataset/highway_s4");
+    let gt = read_json(&ds.join("gt_data.json"));
+    assert!(gt["measurementLines"].as_array().unwrap().len() >= 2);
+    assert!(gt["cars"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["valid"] == true));
+    let d = &gt["distanceMeasurement"][0];
+    let points = format!(
+        "{},{},{},{}",
+        d["p1"][0], d["p1"][1], d["p2"][0], d["p2"][1]
+    );
+    let distance = d["distance"].as_f64().unwrap().to_string();
+    let results = dir.path().join("results");
+    std::fs::create_dir_all(results.join("highway_s4")).unwrap();
+    let system = results.join("highway_s4/system_vpcal.json");
+    let tracks_csv = dir.path().join("tracks.csv");
+    let tracks_json = dir.path().join("tracks.json");
+    let run = |tracks: &Path| {
+        vpcal(&[
+            "calibrate",
+            ds.join("frames").to_str().unwrap(),
+            "--fps",
+            "25",
+            "--detections",
+            ds.join("detections.csv").to_str().unwrap(),
+            "--scale-points",
+            &points,
+            "--scale-distance",
+            &distance,
+            "--tracks",
+            tracks.to_str().unwrap(),
+            "--bcs-json",
+            system.to_str().unwrap(),
+            "--bootstrap",
+            "0",
+            "--quiet",
+        ])
+    };
+    let r = run(&tracks_json);
+    assert_eq!(r.status.code(), Some(0), "{}", text(&r));
+    assert!(
+        common::stdout(&r).contains("with a speed, median speed"),
+        "{}",
+        text(&r)
+    );
+    let doc = read_json(&tracks_json);
+    assert_eq!(doc["format"], "vpcal-tracks/1");
+    assert_eq!(doc["fps"].as_f64(), Some(25.0));
+    let tracks = doc["tracks"].as_array().unwrap();
+    let speeds: Vec<f64> = tracks
+        .iter()
+        .filter_map(|t| t["speed_kmh"].as_f64())
+        .collect();
+    assert!(speeds.len() >= 3, "{} tracks with a speed", speeds.len());
+    // Highway traffic: 50-160 km/h.
+    assert!(speeds.iter().all(|s| *s > 20.0 && *s < 250.0), "{speeds:?}");
+    let t0 = &tracks[0];
+    assert_eq!(
+        t0["frames"].as_array().unwrap().len(),
+        t0["road_x_m"].as_array().unwrap().len()
+    );
+    // The BrnoCompSpeed file has the cars and the scale.
+    let sys = read_json(&system);
+    assert!(!sys["cars"].as_array().unwrap().is_empty());
+    assert!(sys["camera_calibration"]["scale"].as_f64().unwrap() != 1.0);
+    // CSV: a header and one row per track point.
+    let r = run(&tracks_csv);
+    assert_eq!(r.status.code(), Some(0), "{}", text(&r));
+    let csv = std::fs::read_to_string(&tracks_csv).unwrap();
+    assert!(csv.starts_with("id,frame,time_s,x_px,y_px,clipped,road_x_m,road_y_m,speed_kmh"));
+    let points: usize = tracks
+        .iter()
+        .map(|t| t["frames"].as_array().unwrap().len())
+        .sum();
+    assert_eq!(csv.lines().count(), points + 1);
+    let r = vpcal(&[
+        "eval",
+        "speed",
+        "--dataset",
+        root.join("dataset").to_str().unwrap(),
+        "--results",
+        results.to_str().unwrap(),
+        "--image-size",
+        "480x270",
+        "--json",
+    ]);
+    assert_eq!(r.status.code(), Some(0), "{}", text(&r));
+    let v: serde_json::Value = serde_json::from_str(&common::stdout(&r)).unwrap();
+    let speed = &v[0]["videos"][0];
+    let recall = speed["recall"].as_f64().unwrap();
+    let median = speed["abs_kmh"]["median"].as_f64().unwrap();
+    assert!(recall > 0.5, "recall {recall}: {speed}");
+    assert!(median.is_finite(), "{speed}");
+    eprintln!("eval speed: recall {recall}, median abs error {median} km/h");
+}
