@@ -201,31 +201,14 @@ pub fn build_tracks(
 }
 
 /// Median of `v` (NaN when empty).
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
+fn median(v: Vec<f64>) -> f64 {
+    vpcal_geom::solve::median(&v).unwrap_or(f64::NAN)
 }
 
 /// Least-squares slope of `y` on `x`; `None` when `x` does not vary.
 fn slope(x: &[f64], y: &[f64]) -> Option<f64> {
-    let n = x.len() as f64;
-    let mx = x.iter().sum::<f64>() / n;
-    let my = y.iter().sum::<f64>() / n;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (a, b) in x.iter().zip(y) {
-        sxy += (a - mx) * (b - my);
-        sxx += (a - mx) * (a - mx);
-    }
-    let s = sxy / sxx;
-    (sxx > 0.0 && s.is_finite()).then_some(s)
+    let (s, _) = vpcal_formats::bcs_speed::least_squares(x, y);
+    s.is_finite().then_some(s)
 }
 
 /// Distances of `pos` along the direction of travel (from the mean of the first third of the
