@@ -4,3 +4,4 @@
 mod geometry;
 mod robust;
 mod tracks;
+mod vehicle_scale;

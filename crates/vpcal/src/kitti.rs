@@ -39,6 +39,10 @@ struct TruthFile {
 struct TruthFrame {
     image: PathBuf,
     pp: [f64; 2],
+    #[serde(default)]
+    fx: Option<f64>,
+    #[serde(default)]
+    ground_plane_avod: Option<[f64; 4]>,
     vehicles: Vec<TruthVehicle>,
 }
 
@@ -51,6 +55,10 @@ struct TruthVehicle {
     box2d_label: [f64; 4],
     vp1_h: [f64; 3],
     vp2_h: [f64; 3],
+    #[serde(default)]
+    dims_hwl: Option<[f64; 3]>,
+    #[serde(default)]
+    rotation_y: Option<f64>,
 }
 
 /// One labelled vehicle with its exact VPs.
@@ -64,6 +72,10 @@ pub struct KittiVehicle {
     /// Exact VPs, homogeneous `[x, y, w]` (`w ≈ 0`: at infinity).
     pub vp1: [f64; 3],
     pub vp2: [f64; 3],
+    /// The 3D label's height, width and length, metres.
+    pub dims_hwl: Option<[f64; 3]>,
+    /// The 3D label's heading about the camera's y axis, radians (KITTI `rotation_y`).
+    pub rotation_y: Option<f64>,
 }
 
 impl KittiVehicle {
@@ -79,6 +91,11 @@ pub struct KittiFrame {
     pub id: String,
     pub image: PathBuf,
     pub pp: Point2,
+    /// Focal length of the left colour camera, pixels.
+    pub fx: Option<f64>,
+    /// The road plane `a x + b y + c z + d = 0` in camera coordinates (metres; the AVOD
+    /// ground planes: `d` is the camera's height above the road).
+    pub ground_plane: Option<[f64; 4]>,
     pub vehicles: Vec<KittiVehicle>,
 }
 
@@ -116,12 +133,16 @@ pub fn read_truth(dir: &Path) -> Result<Vec<KittiFrame>> {
                 bbox,
                 vp1: v.vp1_h,
                 vp2: v.vp2_h,
+                dims_hwl: v.dims_hwl,
+                rotation_y: v.rotation_y,
             });
         }
         frames.push(KittiFrame {
             id,
             image: dir.join(f.image),
             pp: Point2::new(f.pp[0], f.pp[1]),
+            fx: f.fx,
+            ground_plane: f.ground_plane_avod,
             vehicles,
         });
     }
@@ -312,4 +333,87 @@ pub fn summarize(values: impl Iterator<Item = Option<f64>>) -> Option<ErrorSumma
         median_deg: vpcal_geom::solve::percentile_sorted(&v, 50.0),
         p90_deg: vpcal_geom::solve::percentile_sorted(&v, 90.0),
     })
+}
+
+/// The camera of a KITTI frame from its focal length and ground plane, with the road frame's
+/// x axis 45° off the view direction (so both VPs are finite), and the true metres per
+/// plane unit (the plane's `d`, the camera height, over the camera's height in plane units);
+/// `None` without a plane or focal length.
+pub fn frame_camera(frame: &KittiFrame) -> Option<(vpcal_geom::camera::Calibration, f64)> {
+    let [a, b, c, d] = frame.ground_plane?;
+    let f = frame.fx?;
+    let norm = (a * a + b * b + c * c).sqrt();
+    let n = [a / norm, b / norm, c / norm];
+    let along = vpcal_geom::normalize3([-n[2] * n[0], -n[2] * n[1], 1.0 - n[2] * n[2]])?;
+    let across = vpcal_geom::cross(n, along);
+    let e1: Vec<f64> = (0..3).map(|i| along[i] + across[i]).collect();
+    let e2 = vpcal_geom::cross(n, [e1[0], e1[1], e1[2]]);
+    let pp = frame.pp;
+    let vp = |v: &[f64]| Point2::new(pp.x + f * v[0] / v[2], pp.y + f * v[1] / v[2]);
+    let cal = vpcal_geom::camera::Calibration::from_vps(vp(&e1), vp(&e2), pp).ok()?;
+    // The BrnoCompSpeed convention has the camera look down at the road; where the road
+    // rises ahead of this car-mounted camera (the plane normal leans towards it) the
+    // convention's normal points the wrong way, and the frame is left out.
+    let down = -(0..3).map(|i| cal.road_normal[i] * n[i]).sum::<f64>();
+    if down <= 0.0 {
+        return None;
+    }
+    let m_per_unit = d / norm / cal.plane_distance();
+    m_per_unit.is_finite().then_some((cal, m_per_unit))
+}
+
+/// One KITTI car's size, read by the automatic scale's cuboid fit
+/// ([`vpcal_geom::vehicle_scale`]) on the true camera: metres per plane unit it implies over
+/// the truth.
+#[derive(Debug, Clone, Serialize)]
+pub struct ScaleVehicle {
+    pub frame: String,
+    pub index: usize,
+    pub bbox: [f64; 4],
+    /// With the car's own labelled dimensions: the cuboid-against-silhouette bias alone.
+    pub own_dims_ratio: Option<f64>,
+    pub own_dims_rms: Option<f64>,
+    /// With the typical car ([`vpcal_geom::vehicle_scale::PASSENGER_CAR`]): what the
+    /// automatic scale sees (bias and the car's departure from the typical one).
+    pub typical_ratio: Option<f64>,
+    pub typical_rms: Option<f64>,
+}
+
+/// The cuboid fit on every clean car of `frames` with a 3D label and a ground plane.
+pub fn scale_check(frames: &[KittiFrame]) -> Vec<ScaleVehicle> {
+    use vpcal_geom::vehicle_scale::{fit_cuboid, PASSENGER_CAR};
+    let mut out = Vec::new();
+    for frame in frames {
+        let Some((cal, truth)) = frame_camera(frame) else {
+            continue;
+        };
+        let axes = cal.road_frame().rotation;
+        for (index, v) in frame.vehicles.iter().enumerate() {
+            let (Some([h, w, l]), Some(ry)) = (v.dims_hwl, v.rotation_y) else {
+                continue;
+            };
+            if v.kind != "Car" || !v.is_clean() {
+                continue;
+            }
+            // The car's length axis in camera coordinates, then in the road frame.
+            let d = [ry.cos(), 0.0, -ry.sin()];
+            let on = |k: usize| (0..3).map(|i| axes[i][k] * d[i]).sum::<f64>();
+            let heading = on(1).atan2(on(0));
+            let read = |dims: [f64; 3]| {
+                fit_cuboid(&cal, v.bbox, heading, dims).map(|fit| (1.0 / fit.size / truth, fit.rms))
+            };
+            let own = read([l, w, h]);
+            let typical = read(PASSENGER_CAR);
+            out.push(ScaleVehicle {
+                frame: frame.id.clone(),
+                index,
+                bbox: [v.bbox.x0, v.bbox.y0, v.bbox.x1, v.bbox.y1],
+                own_dims_ratio: own.map(|o| o.0),
+                own_dims_rms: own.map(|o| o.1),
+                typical_ratio: typical.map(|o| o.0),
+                typical_rms: typical.map(|o| o.1),
+            });
+        }
+    }
+    out
 }

@@ -50,6 +50,10 @@ pub enum EvalCommand {
     /// (DATA/vp_gt.json): the network, the guess "VP1 at the principal point", VP2 from
     /// edgelets.
     Kitti(super::kitti::KittiArgs),
+    /// The automatic metric scale's cuboid fit on real KITTI cars with exact 3D labels and
+    /// road planes: the metres per plane unit each car implies, over the truth, with its own
+    /// labelled dimensions and with the typical car's.
+    KittiScale(super::kitti::KittiScaleArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -174,6 +178,7 @@ pub fn run(cmd: EvalCommand) -> Result<()> {
         EvalCommand::Vpout(args) => run_vpout(&args),
         EvalCommand::Speed(args) => run_speed(&args),
         EvalCommand::Kitti(args) => super::kitti::run(args),
+        EvalCommand::KittiScale(args) => super::kitti::run_scale(args),
     }
 }
 

@@ -121,3 +121,99 @@ pub fn run(a: KittiArgs) -> Result<()> {
     }
     Ok(())
 }
+
+#[derive(Debug, clap::Args)]
+pub struct KittiScaleArgs {
+    /// The folder holding `vp_gt.json` (`$VPCAL_DATA/real/kitti_object`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Write every car's measurements as JSON.
+    #[arg(long, value_name = "FILE")]
+    pub vehicles: Option<PathBuf>,
+    /// Print machine-readable JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Median and 16th-84th percentiles of ratios, with the median misfit.
+#[derive(Debug, serde::Serialize)]
+struct RatioSummary {
+    n: usize,
+    median: f64,
+    p16: f64,
+    p84: f64,
+    median_fit_rms: f64,
+}
+
+fn ratio_summary(pairs: impl Iterator<Item = (Option<f64>, Option<f64>)>) -> Option<RatioSummary> {
+    let (mut r, mut rms): (Vec<f64>, Vec<f64>) = pairs
+        .filter_map(|(a, b)| Some((a?, b?)))
+        .filter(|(a, b)| a.is_finite() && b.is_finite())
+        .unzip();
+    if r.is_empty() {
+        return None;
+    }
+    r.sort_by(f64::total_cmp);
+    rms.sort_by(f64::total_cmp);
+    let p = vpcal_geom::solve::percentile_sorted;
+    Some(RatioSummary {
+        n: r.len(),
+        median: p(&r, 50.0),
+        p16: p(&r, 16.0),
+        p84: p(&r, 84.0),
+        median_fit_rms: p(&rms, 50.0),
+    })
+}
+
+pub fn run_scale(a: KittiScaleArgs) -> Result<()> {
+    if let Some(path) = &a.vehicles {
+        vpcal::output::check_destination("--vehicles", path)?;
+    }
+    let frames = kitti::read_truth(&a.data)?;
+    let cars = kitti::scale_check(&frames);
+    if cars.is_empty() {
+        anyhow::bail!(
+            "{}: no clean car with a 3D label (dims_hwl, rotation_y) in a frame with fx and \
+             ground_plane_avod",
+            a.data.join("vp_gt.json").display()
+        );
+    }
+    let own = ratio_summary(cars.iter().map(|c| (c.own_dims_ratio, c.own_dims_rms)));
+    let typical = ratio_summary(cars.iter().map(|c| (c.typical_ratio, c.typical_rms)));
+    if let Some(path) = &a.vehicles {
+        let json = serde_json::to_string_pretty(&cars)?;
+        vpcal_formats::fs::write_atomic(path, json.as_bytes())?;
+    }
+    if a.json {
+        let report = serde_json::json!({
+            "cars": cars.len(),
+            "typical_car_m": vpcal_geom::vehicle_scale::PASSENGER_CAR,
+            "own_dimensions": own,
+            "typical_dimensions": typical,
+        });
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "{} clean KITTI cars: metres per plane unit from each car's cuboid fit, over the truth",
+        cars.len()
+    );
+    println!(
+        "{:<34} {:>4} {:>8} {:>17} {:>10}",
+        "dimensions", "n", "median", "16-84th pct", "fit rms"
+    );
+    let [l, w, h] = vpcal_geom::vehicle_scale::PASSENGER_CAR;
+    for (label, s) in [
+        ("the car's own (3D label)".to_string(), &own),
+        (format!("typical car {l} x {w} x {h} m"), &typical),
+    ] {
+        match s {
+            Some(s) => println!(
+                "{label:<34} {:>4} {:>8.3} {:>8.3}-{:<8.3} {:>10.4}",
+                s.n, s.median, s.p16, s.p84, s.median_fit_rms
+            ),
+            None => println!("{label:<34} {:>4}", 0),
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,271 @@
+//! The metric scale of a calibration from the sizes of the vehicles it sees (DESIGN.md's
+//! metric scale; the idea of Dubská et al. 2014: 3D boxes of passing cars against the typical
+//! dimensions of the traffic).
+//!
+//! A calibration from vanishing points knows the road plane up to scale: in its plane units
+//! a car is some size `c` times its size in metres, the same `c` everywhere. For each
+//! detector box this module finds the 3D box — a cuboid standing on the road, heading along
+//! the road (or a given heading), with the proportions of a typical passenger car — whose
+//! image fills the detector box best; its size gives that vehicle's `c`. Vehicles differ
+//! (a small hatchback, a van, a truck), so the scale is the median over vehicles (over
+//! tracks, when the boxes of one vehicle are linked), read as the size of the median vehicle
+//! of the traffic: a passenger car wherever most traffic is cars.
+//!
+//! # Statistics
+//! [`PASSENGER_CAR`]: 4.4 × 1.8 × 1.5 m (length, width without mirrors, height), rounded
+//! typical body dimensions of European compact-to-mid-size cars, the bulk of European traffic
+//! (a VW Golf is about 4.28 × 1.79 × 1.46 m, a Škoda Octavia 4.69 × 1.83 × 1.47 m). Fleets
+//! differ: KITTI's German 2011 cars average about 3.9 × 1.6 × 1.5 m in its labels, US traffic
+//! is larger. That spread, about 8 % in linear size either way, is carried as
+//! [`FLEET_LOG_SD`] in every automatic scale's interval, on top of the sampling spread.
+//!
+//! # Cuboid against silhouette
+//! A car is a rounded cuboid: its roof is narrower than its body and its corners are cut, so
+//! its image is a little smaller than the image of its bounding cuboid. The fit therefore
+//! reads a car as slightly smaller than it is, and the scale (metres per unit) comes out
+//! slightly large. `vpcal eval kitti-scale` measures both this bias and the fleet's on real
+//! KITTI vehicles with exact 3D labels.
+
+use crate::camera::Calibration;
+use crate::point::{BoxPx, Point2};
+use crate::solve::{nelder_mead, weighted_median, SplitMix};
+
+/// Typical passenger-car dimensions `[length, width, height]`, metres (module docs).
+pub const PASSENGER_CAR: [f64; 3] = [4.4, 1.8, 1.5];
+
+/// Spread of the traffic's typical car size between fleets, in `ln` of linear size (module
+/// docs): part of every automatic scale's uncertainty.
+pub const FLEET_LOG_SD: f64 = 0.08;
+
+/// Largest RMS misfit of a box's four sides, as a fraction of the box diagonal, for the
+/// vehicle to count: above it the box is not one cuboid (two merged vehicles, a partial
+/// occlusion, a shadow).
+pub const MAX_FIT_RMS: f64 = 0.06;
+
+/// Boxes within this many pixels of the image border are cut off by it and are not used.
+pub const BORDER_PX: f64 = 2.0;
+
+/// Fewest vehicles (or tracks) for an automatic scale.
+pub const MIN_VEHICLES: usize = 5;
+
+/// A vehicle's detector box, with what is known about it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SizedBox {
+    pub bbox: BoxPx,
+    /// Heading on the road, radians from the road frame's x axis (the direction towards
+    /// VP1); `None`: along the road.
+    pub heading: Option<f64>,
+    /// Boxes with the same group are one vehicle (a track): it counts once.
+    pub group: Option<u64>,
+}
+
+/// The cuboid fitted to one box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CuboidFit {
+    /// Plane units per metre of the typical car: the cuboid is `size × dims` in plane units.
+    pub size: f64,
+    /// The cuboid's centre on the road, road frame, plane units.
+    pub centre: [f64; 2],
+    /// RMS misfit of the four box sides, fraction of the box diagonal.
+    pub rms: f64,
+}
+
+/// The pixel of road-frame point `q` (plane units; `q[2]` up from the road), `None` behind
+/// the camera.
+fn pixel_of(cal: &Calibration, frame: &crate::camera::RoadFrame, q: [f64; 3]) -> Option<Point2> {
+    let m = &frame.rotation;
+    let t = frame.translation;
+    let c: Vec<f64> = (0..3)
+        .map(|i| m[i][0] * q[0] + m[i][1] * q[1] + m[i][2] * q[2] + t[i])
+        .collect();
+    if c[2].is_nan() || c[2] <= 1e-9 {
+        return None;
+    }
+    let p = Point2::new(
+        cal.pp.x + cal.focal_px * c[0] / c[2],
+        cal.pp.y + cal.focal_px * c[1] / c[2],
+    );
+    p.is_finite().then_some(p)
+}
+
+/// The image bounding box of a cuboid on the road: centre `centre` (road frame), heading
+/// `heading`, dimensions `dims` (plane units); `None` when a corner is behind the camera.
+pub fn cuboid_box(
+    cal: &Calibration,
+    centre: [f64; 2],
+    heading: f64,
+    dims: [f64; 3],
+) -> Option<BoxPx> {
+    let frame = cal.road_frame();
+    let (s, c) = heading.sin_cos();
+    let mut b = BoxPx {
+        x0: f64::INFINITY,
+        y0: f64::INFINITY,
+        x1: f64::NEG_INFINITY,
+        y1: f64::NEG_INFINITY,
+    };
+    for a in [-0.5, 0.5] {
+        for w in [-0.5, 0.5] {
+            let (dx, dy) = (a * dims[0], w * dims[1]);
+            let x = centre[0] + dx * c - dy * s;
+            let y = centre[1] + dx * s + dy * c;
+            for z in [0.0, dims[2]] {
+                let p = pixel_of(cal, &frame, [x, y, z])?;
+                b.x0 = b.x0.min(p.x);
+                b.y0 = b.y0.min(p.y);
+                b.x1 = b.x1.max(p.x);
+                b.y1 = b.y1.max(p.y);
+            }
+        }
+    }
+    Some(b)
+}
+
+/// The cuboid of proportions `dims` (metres) heading `heading` whose image fits `bbox`
+/// best; `None` when the box's bottom does not see the road.
+pub fn fit_cuboid(
+    cal: &Calibration,
+    bbox: BoxPx,
+    heading: f64,
+    dims: [f64; 3],
+) -> Option<CuboidFit> {
+    let bottom = Point2::new(0.5 * (bbox.x0 + bbox.x1), bbox.y1);
+    let q0 = cal.road_point(bottom)?;
+    let left = cal.road_point(Point2::new(bbox.x0, bbox.y1))?;
+    let right = cal.road_point(Point2::new(bbox.x1, bbox.y1))?;
+    let across = ((left[0] - right[0]).powi(2) + (left[1] - right[1]).powi(2)).sqrt();
+    if across.is_nan() || across <= 0.0 {
+        return None;
+    }
+    let diag = (bbox.width().powi(2) + bbox.height().powi(2)).sqrt();
+    let misfit = |p: &[f64]| -> f64 {
+        let size = p[2].exp();
+        let d = [size * dims[0], size * dims[1], size * dims[2]];
+        match cuboid_box(cal, [p[0], p[1]], heading, d) {
+            Some(b) => {
+                ((b.x0 - bbox.x0).powi(2)
+                    + (b.y0 - bbox.y0).powi(2)
+                    + (b.x1 - bbox.x1).powi(2)
+                    + (b.y1 - bbox.y1).powi(2))
+                    / (diag * diag)
+            }
+            None => f64::INFINITY,
+        }
+    };
+    // The box's width on the road at its bottom is roughly the car's width or length seen
+    // obliquely: start from a few sizes around it.
+    let size0 = across / dims[1];
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    for k in [0.4, 0.7, 1.0] {
+        let size = size0 * k;
+        // The bottom of the box is the near edge of the footprint: the centre lies beyond.
+        let start = [q0[0], q0[1], size.ln()];
+        let step = [0.5 * size * dims[0], 0.5 * size * dims[1], 0.2];
+        let m = nelder_mead(misfit, &start, &step, 600);
+        if best.as_ref().is_none_or(|b| m.value < b.0) {
+            best = Some((m.value, m.x));
+        }
+    }
+    let (value, x) = best?;
+    let fit = CuboidFit {
+        size: x[2].exp(),
+        centre: [x[0], x[1]],
+        rms: (value / 4.0).sqrt(),
+    };
+    (fit.size.is_finite() && fit.rms.is_finite()).then_some(fit)
+}
+
+/// An automatic metric scale.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct VehicleScale {
+    /// Metres per plane unit (the BCS `scale`).
+    pub m_per_unit: f64,
+    /// 68 % interval of it: sampling spread (bootstrap over vehicles) and the fleet's
+    /// ([`FLEET_LOG_SD`]) together.
+    pub interval: [f64; 2],
+    /// Sampling spread alone, in `ln`.
+    pub sampling_log_sd: f64,
+    /// Vehicles (tracks, or single boxes without a track) that counted, and boxes.
+    pub vehicles: usize,
+    pub boxes: usize,
+    /// Boxes fitted but rejected for their misfit, and cut by the border.
+    pub rejected_misfit: usize,
+    pub rejected_border: usize,
+    /// Median misfit of the used boxes (fraction of the diagonal).
+    pub median_rms: f64,
+}
+
+/// The metric scale of `cal` from `boxes` in a `width` x `height` image, with the typical
+/// vehicle `dims` (metres, e.g. [`PASSENGER_CAR`]); `None` with fewer than
+/// [`MIN_VEHICLES`] usable vehicles.
+pub fn scale_from_vehicles(
+    cal: &Calibration,
+    boxes: &[SizedBox],
+    width: f64,
+    height: f64,
+    dims: [f64; 3],
+    seed: u64,
+) -> Option<VehicleScale> {
+    let mut rejected_border = 0;
+    let mut rejected_misfit = 0;
+    // (group, ln metres-per-unit, rms)
+    let mut fits: Vec<(Option<u64>, f64, f64)> = Vec::new();
+    for b in boxes {
+        let bb = b.bbox;
+        if !bb.is_valid() {
+            continue;
+        }
+        if bb.x0 < BORDER_PX
+            || bb.y0 < BORDER_PX
+            || bb.x1 > width - BORDER_PX
+            || bb.y1 > height - BORDER_PX
+        {
+            rejected_border += 1;
+            continue;
+        }
+        let Some(fit) = fit_cuboid(cal, bb, b.heading.unwrap_or(0.0), dims) else {
+            continue;
+        };
+        if fit.rms > MAX_FIT_RMS {
+            rejected_misfit += 1;
+            continue;
+        }
+        fits.push((b.group, -fit.size.ln(), fit.rms));
+    }
+    // One value per vehicle: the median of its boxes.
+    let mut groups: std::collections::BTreeMap<u64, Vec<f64>> = Default::default();
+    let mut values = Vec::new();
+    for (g, v, _) in &fits {
+        match g {
+            Some(g) => groups.entry(*g).or_default().push(*v),
+            None => values.push(*v),
+        }
+    }
+    for g in groups.values() {
+        values.extend(crate::solve::median(g));
+    }
+    if values.len() < MIN_VEHICLES {
+        return None;
+    }
+    let ones = vec![1.0; values.len()];
+    let centre = weighted_median(&values, &ones)?;
+    let mut rng = SplitMix(seed ^ 0x5CA1_E000);
+    let mut resampled = Vec::with_capacity(200);
+    for _ in 0..200 {
+        let w: Vec<f64> = values.iter().map(|_| rng.poisson1()).collect();
+        resampled.extend(weighted_median(&values, &w));
+    }
+    let sampling = crate::solve::sd(&resampled);
+    let total = (sampling * sampling + FLEET_LOG_SD * FLEET_LOG_SD).sqrt();
+    let rms: Vec<f64> = fits.iter().map(|f| f.2).collect();
+    Some(VehicleScale {
+        m_per_unit: centre.exp(),
+        interval: [(centre - total).exp(), (centre + total).exp()],
+        sampling_log_sd: sampling,
+        vehicles: values.len(),
+        boxes: fits.len(),
+        rejected_misfit,
+        rejected_border,
+        median_rms: crate::solve::median(&rms).unwrap_or(f64::NAN),
+    })
+}

@@ -1,0 +1,112 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! The automatic metric scale: cuboids of known size on a known camera's road are recovered
+//! from their image boxes alone.
+
+use proptest::prelude::*;
+use vpcal_geom::camera::Calibration;
+use vpcal_geom::vehicle_scale::{
+    cuboid_box, fit_cuboid, scale_from_vehicles, SizedBox, FLEET_LOG_SD, PASSENGER_CAR,
+};
+use vpcal_geom::Point2;
+
+/// A 1920x1080 camera with focal length `f`, looking `tilt` below the horizon and `yaw`
+/// across the road.
+fn camera(f: f64, tilt_deg: f64, yaw_deg: f64) -> Calibration {
+    let pp = Point2::new(960.0, 540.0);
+    let (t, y) = (tilt_deg.to_radians(), yaw_deg.to_radians());
+    // Camera coordinates: x right, y down, z forward. Road direction along the view, yawed.
+    let along = [y.sin(), t.sin() * y.cos(), t.cos() * y.cos()];
+    let across = [y.cos(), -t.sin() * y.sin(), -t.cos() * y.sin()];
+    let vp = |d: [f64; 3]| Point2::new(pp.x + f * d[0] / d[2], pp.y + f * d[1] / d[2]);
+    Calibration::from_vps(vp(along), vp(across), pp).unwrap()
+}
+
+#[test]
+fn a_cuboid_is_recovered_from_its_image_box() {
+    let cal = camera(1400.0, 18.0, 25.0);
+    let h = cal.plane_distance();
+    // A car 8 m-high camera's worth of units: metres per unit = 8 / h.
+    let size = h / 8.0;
+    let dims = PASSENGER_CAR.map(|d| d * size);
+    for (i, centre) in [[3.0, 0.0], [5.0, 0.5], [2.0, -0.3]].iter().enumerate() {
+        let c = [centre[0] * h, centre[1] * h];
+        let b = cuboid_box(&cal, c, 0.0, dims).unwrap();
+        let fit = fit_cuboid(&cal, b, 0.0, PASSENGER_CAR).unwrap();
+        assert!(
+            (fit.size / size - 1.0).abs() < 0.01,
+            "{i}: {} vs {size}",
+            fit.size
+        );
+        assert!(fit.rms < 1e-3, "{i}: {fit:?}");
+    }
+}
+
+#[test]
+fn the_scale_of_typical_cars_is_their_camera_height() {
+    let cal = camera(1600.0, 15.0, 10.0);
+    let h = cal.plane_distance();
+    let height_m = 7.5;
+    let size = h / height_m;
+    let boxes: Vec<SizedBox> = (0..12)
+        .filter_map(|i| {
+            let c = [
+                (2.5 + 0.4 * i as f64) * h,
+                (i % 3) as f64 * 0.3 * h - 0.3 * h,
+            ];
+            let b = cuboid_box(&cal, c, 0.0, PASSENGER_CAR.map(|d| d * size))?;
+            Some(SizedBox {
+                bbox: b,
+                heading: None,
+                group: None,
+            })
+        })
+        .collect();
+    assert!(boxes.len() >= 10);
+    let s = scale_from_vehicles(&cal, &boxes, 1920.0, 1080.0, PASSENGER_CAR, 1).unwrap();
+    let est_height = s.m_per_unit * h;
+    assert!((est_height / height_m - 1.0).abs() < 0.01, "{s:?}");
+    // The interval carries the fleet's spread even when the sample agrees exactly.
+    let width = (s.interval[1] / s.interval[0]).ln();
+    assert!(width >= 2.0 * FLEET_LOG_SD * 0.99, "{s:?}");
+    // Too few vehicles: no scale.
+    assert!(scale_from_vehicles(&cal, &boxes[..3], 1920.0, 1080.0, PASSENGER_CAR, 1).is_none());
+}
+
+#[test]
+fn boxes_cut_by_the_border_do_not_count() {
+    let cal = camera(1600.0, 15.0, 10.0);
+    let h = cal.plane_distance();
+    let size = h / 7.5;
+    let b = cuboid_box(&cal, [3.0 * h, 0.0], 0.0, PASSENGER_CAR.map(|d| d * size)).unwrap();
+    let cut = vpcal_geom::BoxPx { x0: 0.0, ..b };
+    let boxes = vec![
+        SizedBox {
+            bbox: cut,
+            heading: None,
+            group: None,
+        };
+        10
+    ];
+    assert!(scale_from_vehicles(&cal, &boxes, 1920.0, 1080.0, PASSENGER_CAR, 1).is_none());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    /// Any camera, place and heading: the fitted size is the cuboid's.
+    #[test]
+    fn fitted_size_matches(f in 800.0f64..3000.0, tilt in 8.0f64..40.0, yaw in -40.0f64..40.0,
+                           ahead in 1.5f64..4.0, side in -0.4f64..0.4, heading in -1.5f64..1.5,
+                           k in 0.7f64..1.4) {
+        let cal = camera(f, tilt, yaw);
+        let h = cal.plane_distance();
+        let size = k * h / 8.0;
+        let c = [ahead * h / tilt.to_radians().tan().max(0.2), side * h];
+        let dims = PASSENGER_CAR.map(|d| d * size);
+        let b = cuboid_box(&cal, c, heading, dims);
+        prop_assume!(b.is_some_and(|b| b.is_valid() && b.width() > 8.0));
+        let b = b.unwrap();
+        let fit = fit_cuboid(&cal, b, heading, PASSENGER_CAR).unwrap();
+        prop_assert!(fit.rms < 0.01, "{:?}", fit);
+        prop_assert!((fit.size / size - 1.0).abs() < 0.03, "{} vs {}", fit.size, size);
+    }
+}
