@@ -149,6 +149,15 @@ pub struct DemoComparison {
     pub horizon_y_at_centre: Option<f64>,
     pub true_horizon_y_at_centre: Option<f64>,
     pub bcs_ratio_error_pct: RatioErrors,
+    /// The automatic scale (from the vehicles' sizes) against the best scale for the
+    /// estimated camera (the one that fits the scene's true road distances), percent; `None`
+    /// without an automatic scale.
+    #[serde(default)]
+    pub scale_error_pct: Option<f64>,
+    /// Median error of the scene's true road distances measured with the estimated camera
+    /// and its automatic scale, percent.
+    #[serde(default)]
+    pub distance_error_pct: Option<f64>,
 }
 
 /// BrnoCompSpeed ratio errors of road distances, percent.

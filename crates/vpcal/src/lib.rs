@@ -17,6 +17,7 @@
 //! (`vpcal-net`), footage and detectors (`vpcal-video`), the synthetic world (`vpcal-synth`).
 
 pub mod aggregate;
+pub mod autoscale;
 pub mod detector;
 pub mod kitti;
 pub mod model;

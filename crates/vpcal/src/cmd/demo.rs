@@ -13,7 +13,7 @@ use vpcal::overlay;
 use vpcal_formats::bcs::{read_gt, read_system};
 use vpcal_formats::calib::{DemoComparison, RatioErrors};
 use vpcal_geom::camera::Calibration;
-use vpcal_geom::metrics::{ratio_errors, summarize};
+use vpcal_geom::metrics::{optimal_scale, ratio_errors, scaled_distance_errors, summarize};
 use vpcal_synth::scene::{render_scene, SceneSpec, WriteOptions};
 use vpcal_synth::world::LayoutKind;
 
@@ -125,6 +125,16 @@ pub fn run(mut a: Args) -> Result<Exit> {
     let hy = |c: &Calibration| c.horizon.y_at(cx).unwrap_or(f64::NAN);
     let focal_err = (cal.focal_px / truth.focal_px - 1.0) * 100.0;
 
+    let auto = vpcal::autoscale::vehicle_scale(&out, &cal, a.seed);
+    let best_scale = optimal_scale(&cal, &measurements);
+    let scale_err = auto
+        .as_ref()
+        .zip(best_scale)
+        .map(|(s, b)| (s.m_per_unit / b - 1.0) * 100.0);
+    let distance_err = auto
+        .as_ref()
+        .and_then(|s| scaled_distance_errors(&cal, s.m_per_unit, &measurements))
+        .and_then(|v| vpcal_geom::solve::median(&v));
     let mut doc = output::calibration_file(&out, &config, &cal, &agg);
     doc.demo = Some(DemoComparison {
         scene: name.clone(),
@@ -142,6 +152,8 @@ pub fn run(mut a: Args) -> Result<Exit> {
             max: ratio.max,
             pairs: ratio.n,
         },
+        scale_error_pct: scale_err,
+        distance_error_pct: distance_err,
     });
     doc.write(&a.out.join("calib.json"))?;
     output::write_bcs_system(&results.join("system_vpcal.json"), &cal, None)?;
@@ -171,6 +183,14 @@ pub fn run(mut a: Args) -> Result<Exit> {
         "BCS ratio error: mean {:.2} %, median {:.2} %, p95 {:.2} %, max {:.2} % over {} distance pairs",
         ratio.mean, ratio.median, ratio.p95, ratio.max, ratio.n
     );
+    match (&auto, best_scale, scale_err, distance_err) {
+        (Some(s), Some(b), Some(e), Some(d)) => println!(
+            "automatic scale: {:.4} m/unit from {} vehicles' sizes, best for this camera {b:.4} \
+             ({e:+.1} %); road distances with it: median error {d:.1} %",
+            s.m_per_unit, s.vehicles
+        ),
+        _ => println!("automatic scale: none (too few vehicles fit a car-shaped box)"),
+    }
     println!(
         "wrote {}, {} and {}",
         a.out.join("calib.json").display(),
