@@ -231,9 +231,23 @@ pub struct CalibrationFile {
     pub scale_m_per_unit: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale_reference: Option<ScaleReference>,
+    /// Where the scale came from: `distance` (a known road distance, `scale_reference`) or
+    /// `vehicles` (the sizes of the vehicles seen, as typical cars); `null` without a scale
+    /// or when a file does not say.
+    #[serde(default)]
+    pub scale_source: Option<String>,
+    /// 68 % interval of `scale_m_per_unit` (for an automatic scale: the sampling spread and
+    /// the spread of typical car sizes between fleets).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_interval_m_per_unit: Option<[f64; 2]>,
     /// Height of the camera above the road, metres (with a scale).
     #[serde(default)]
     pub camera_height_m: Option<f64>,
+    /// Pixels to road points in metres, `[x, y, 1] ~ H [u, v, 1]` (with a scale): the road
+    /// frame of `opencv` (origin under the camera, x along the road towards vp1, y across,
+    /// z up), scaled so that `w = 1` at the principal point.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub road_homography: Option<Mat3>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub opencv: Option<OpenCvCamera>,
     /// What the aggregation used (counts and flags of the method; diagnostic, its members
@@ -284,6 +298,9 @@ impl CalibrationFile {
             scale_m_per_unit: None,
             scale_reference: None,
             camera_height_m: None,
+            road_homography: None,
+            scale_source: None,
+            scale_interval_m_per_unit: None,
             opencv: None,
             evidence: None,
             confidence: None,
@@ -340,6 +357,7 @@ impl CalibrationFile {
             image_size: self.image_size,
         });
         self.camera_height_m = self.scale_m_per_unit.map(|s| s * cal.plane_distance());
+        self.road_homography = self.scale_m_per_unit.and_then(|s| cal.road_homography(s));
     }
 
     /// Give the calibration a metric scale (metres per road unit) and the distance it came
@@ -354,8 +372,26 @@ impl CalibrationFile {
     ) -> Result<(), String> {
         let cal = self.camera()?;
         self.scale_m_per_unit = Some(scale_m_per_unit);
+        self.scale_source = reference.as_ref().map(|_| "distance".to_string());
         self.scale_reference = reference;
+        self.scale_interval_m_per_unit = None;
         self.update_export(&cal);
+        Ok(())
+    }
+
+    /// Give the calibration an automatic metric scale (metres per road unit) from the sizes
+    /// of the vehicles seen, with its 68 % interval.
+    ///
+    /// # Errors
+    /// When the file has no camera.
+    pub fn set_vehicle_scale(
+        &mut self,
+        scale_m_per_unit: f64,
+        interval: [f64; 2],
+    ) -> Result<(), String> {
+        self.set_scale(scale_m_per_unit, None)?;
+        self.scale_source = Some("vehicles".to_string());
+        self.scale_interval_m_per_unit = Some(interval);
         Ok(())
     }
 

@@ -282,6 +282,34 @@ impl Calibration {
         (q[0].is_finite() && q[1].is_finite()).then_some([q[0], q[1]])
     }
 
+    /// The homography from pixels to road-frame points in metres (`[x, y, 1] ~ H [u, v, 1]`,
+    /// the road frame of [`Calibration::road_frame`]: origin under the camera, x along the
+    /// road towards VP1, y across, z up) for a BCS scale of `m_per_unit` metres per plane
+    /// unit, scaled so that `w = 1` at the principal point; `None` when it is singular.
+    pub fn road_homography(&self, m_per_unit: f64) -> Option<Mat3> {
+        let frame = self.road_frame();
+        let r = frame.rotation;
+        let t = frame.translation.map(|v| v * m_per_unit);
+        // Road (x, y, 1) in metres to camera: [r1 r2 t]; then K.
+        let g = [
+            [r[0][0], r[0][1], t[0]],
+            [r[1][0], r[1][1], t[1]],
+            [r[2][0], r[2][1], t[2]],
+        ];
+        let k = self.k();
+        let mut kg = [[0.0; 3]; 3];
+        for (i, row) in kg.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = (0..3).map(|l| k[i][l] * g[l][j]).sum();
+            }
+        }
+        let h = crate::rotation::inverse3(&kg)?;
+        // w = 1 at the principal point (which sees the road for a camera looking down; a
+        // pixel of the top-left corner may lie on the horizon, where w = 0).
+        let n = h[2][0] * self.pp.x + h[2][1] * self.pp.y + h[2][2];
+        (n != 0.0 && n.is_finite()).then(|| h.map(|row| row.map(|v| v / n)))
+    }
+
     /// The pixel that sees road-frame point `(x, y)` (plane units), the inverse of
     /// [`Calibration::road_point`]; `None` behind the camera.
     pub fn pixel_of_road_point(&self, q: [f64; 2]) -> Option<Point2> {

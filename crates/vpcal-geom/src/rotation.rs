@@ -92,6 +92,22 @@ pub fn mat_t_vec(m: &Mat3, v: [f64; 3]) -> [f64; 3] {
     ]
 }
 
+/// The inverse of `m` (adjugate over determinant); `None` when `m` is singular.
+pub fn inverse3(m: &Mat3) -> Option<Mat3> {
+    let c =
+        |r0: usize, c0: usize, r1: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
+    let adj = [
+        [c(1, 1, 2, 2), -c(0, 1, 2, 2), c(0, 1, 1, 2)],
+        [-c(1, 0, 2, 2), c(0, 0, 2, 2), -c(0, 0, 1, 2)],
+        [c(1, 0, 2, 1), -c(0, 0, 2, 1), c(0, 0, 1, 1)],
+    ];
+    let det = m[0][0] * adj[0][0] + m[0][1] * adj[1][0] + m[0][2] * adj[2][0];
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    Some(adj.map(|row| row.map(|v| v / det)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -185,6 +185,15 @@ fn the_road_frame_puts_the_camera_above_the_road_and_keeps_distances() {
         .scale_from_distance(a, b, (9.0f64 + 36.0).sqrt())
         .unwrap();
     assert_relative_eq!(s * calib.plane_distance(), h, max_relative = 1e-9);
+    // The homography in metres maps each pixel to its road point, scaled.
+    let hm = calib.road_homography(s).unwrap();
+    for (p, q) in [(a, qa), (b, qb)] {
+        let v = vpcal_geom::rotation::mat_vec(&hm, [p.x, p.y, 1.0]);
+        assert_relative_eq!(v[0] / v[2], s * q[0], epsilon = 1e-9, max_relative = 1e-9);
+        assert_relative_eq!(v[1] / v[2], s * q[1], epsilon = 1e-9, max_relative = 1e-9);
+    }
+    let v = vpcal_geom::rotation::mat_vec(&hm, [calib.pp.x, calib.pp.y, 1.0]);
+    assert_relative_eq!(v[2], 1.0, max_relative = 1e-12);
     let back = calib.pixel_of_road_point(qa).unwrap();
     assert_relative_eq!(back.x, a.x, max_relative = 1e-9);
     assert_relative_eq!(back.y, a.y, max_relative = 1e-9);
