@@ -232,7 +232,14 @@ impl VpOutItem {
 /// # Errors
 /// [`FormatError`] naming the file and, for a malformed item, its index and field.
 pub fn read_vpout(path: &Path) -> Result<Vec<VpOutItem>, FormatError> {
-    let doc = read_json(path)?;
+    vpout_from_json(&read_json(path)?, path)
+}
+
+/// The items of a `VPout` document already parsed (`path` names it in errors).
+///
+/// # Errors
+/// As [`read_vpout`].
+pub fn vpout_from_json(doc: &Json, path: &Path) -> Result<Vec<VpOutItem>, FormatError> {
     let items = doc.as_array("$").map_err(|e| FormatError::field(path, e))?;
     items
         .iter()

@@ -11,6 +11,7 @@
 //! - [`overlay`]: the picture of a calibration (horizon, road grid, vehicle VP directions).
 //! - [`model`]: the bundled VP network.
 //! - [`progress`]: progress reports of long work.
+//! - [`road`]: metric measurements on the road plane (scale, road points, distances).
 //!
 //! The building blocks live in the other crates of the workspace: geometry and aggregation
 //! (`vpcal-geom`), file formats (`vpcal-formats`, with the calibration file type), the network
@@ -25,6 +26,7 @@ pub mod output;
 pub mod overlay;
 pub mod pipeline;
 pub mod progress;
+pub mod road;
 pub mod tracks;
 
 pub use pipeline::{calibrate, run_pipeline, run_pipeline_on, PipelineConfig, PipelineOutput};

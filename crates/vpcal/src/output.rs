@@ -3,17 +3,19 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use serde_json::{json, Map, Value};
 use vpcal_formats::bcs::{write_system, SystemCalibration, SystemFile};
 use vpcal_formats::calib::{CalibrationFile, Dropped, InputSummary};
-use vpcal_formats::reference::{write_vpout, VpOutItem};
+use vpcal_formats::reference::{infer_image_size, write_vpout, VpOutItem};
+use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_video::{SourceKind, Start};
 
-use crate::aggregate::Aggregated;
-use crate::pipeline::{PipelineConfig, PipelineOutput};
-use crate::tracks::VehicleTrack;
+use crate::aggregate::{aggregate, edgelets_of, Aggregated, Method};
+use crate::pipeline::{PipelineConfig, PipelineOutput, PrincipalPoint};
+use crate::road::{scale_from_points, KnownDistance};
+use crate::tracks::{build_tracks, summary, TrackSettings, VehicleTrack};
 
 /// How calibration files name a kind of input.
 pub fn kind_name(kind: SourceKind) -> &'static str {
@@ -108,6 +110,152 @@ pub fn aggregated_file(
     file.focal_interval_px = agg.focal_interval_px;
     file.warnings = agg.warnings();
     file
+}
+
+/// [`calibration_file`] with the metric scale of `known` (`calibrate --scale-points`) when
+/// given, else the automatic scale from the vehicles' sizes ([`crate::autoscale`]) when
+/// enough vehicles fit a car-shaped box; returns the file and the scale.
+///
+/// # Errors
+/// Pixels of `known` that do not fix a scale (above the horizon, coinciding).
+pub fn calibrated_run_file(
+    out: &PipelineOutput,
+    config: &PipelineConfig,
+    cal: &Calibration,
+    agg: &Aggregated,
+    known: Option<KnownDistance>,
+) -> Result<(CalibrationFile, Option<f64>)> {
+    let mut file = calibration_file(out, config, cal, agg);
+    let Some(k) = known else {
+        let Some(auto) = crate::autoscale::vehicle_scale(out, cal, 0) else {
+            return Ok((file, None));
+        };
+        file.set_vehicle_scale(auto.m_per_unit, auto.interval)
+            .map_err(anyhow::Error::msg)?;
+        file.summary = Some(format!(
+            "{}; scale {}",
+            file.summary.as_deref().unwrap_or_default(),
+            crate::autoscale::summary_line(&auto, cal.plane_distance())
+        ));
+        file.warnings.push(format!(
+            "the metric scale is automatic: the vehicles' sizes read as typical {} x {} x {} m \
+             cars (68% {:.4}-{:.4} m per unit, about ±{:.0} %); give a known road distance \
+             (--scale-points/--scale-distance or `vpcal scale`) for measurements",
+            vpcal_geom::vehicle_scale::PASSENGER_CAR[0],
+            vpcal_geom::vehicle_scale::PASSENGER_CAR[1],
+            vpcal_geom::vehicle_scale::PASSENGER_CAR[2],
+            auto.interval[0],
+            auto.interval[1],
+            50.0 * (auto.interval[1] / auto.interval[0] - 1.0)
+        ));
+        return Ok((file, Some(auto.m_per_unit)));
+    };
+    let (scale, reference) = scale_from_points(cal, k.p1, k.p2, k.distance_m, "--scale-points")?;
+    file.set_scale(scale, Some(reference))
+        .map_err(anyhow::Error::msg)?;
+    Ok((file, Some(scale)))
+}
+
+/// How per-vehicle records are aggregated (`vpcal aggregate`'s flags).
+#[derive(Debug, Clone)]
+pub struct RecordSettings {
+    pub method: Method,
+    pub pp: PrincipalPoint,
+    /// The frames' size; `None`: inferred from the records' boxes.
+    pub image_size: Option<(u32, u32)>,
+    pub min_score: f64,
+    pub bootstrap: usize,
+    pub focal_px: Option<f64>,
+}
+
+impl Default for RecordSettings {
+    fn default() -> RecordSettings {
+        RecordSettings {
+            method: Method::Robust,
+            pp: PrincipalPoint::Centre,
+            image_size: None,
+            min_score: 0.1,
+            bootstrap: 30,
+            focal_px: None,
+        }
+    }
+}
+
+/// What aggregating per-vehicle records gave: the calibration file (with the camera, or
+/// `not_calibrated` and the reason), and the camera when there is one.
+#[derive(Debug)]
+pub struct RecordsCalibration {
+    pub file: CalibrationFile,
+    pub result: Result<(Calibration, Aggregated)>,
+    pub image_size: (u32, u32),
+}
+
+/// Aggregate per-vehicle records `items` (a VPout file's, named `origin` in the file and in
+/// errors) into a calibration file, as `vpcal aggregate` does.
+///
+/// # Errors
+/// A frame size that neither the settings nor the records' boxes give. Too little evidence
+/// is not an error here: the file then says why (`result` holds the reason).
+pub fn aggregate_records(
+    items: &[VpOutItem],
+    origin: &str,
+    s: &RecordSettings,
+) -> Result<RecordsCalibration> {
+    let (width, height) = match s.image_size {
+        Some(size) => size,
+        None => infer_image_size(items).map_err(|e| {
+            anyhow::anyhow!(
+                "{origin}: the frame size is not known: {e}; give it with --image-size WxH"
+            )
+        })?,
+    };
+    let pp = s.pp.resolve(width, height);
+    let vehicles: Vec<VehicleVps> = items.iter().map(VpOutItem::to_vehicle).collect();
+    let input = InputSummary {
+        path: origin.to_string(),
+        kind: Some("vehicle_records".to_string()),
+        width,
+        height,
+        vehicle_boxes: items.len() as u64,
+        ..InputSummary::default()
+    };
+    let settings = json!({
+        "method": s.method.name(),
+        "min_score": s.min_score,
+        "bootstrap": s.bootstrap,
+        "pp": s.pp.to_json(),
+        "image_size": [width, height],
+        "focal": s.focal_px,
+    });
+    let result = aggregate(
+        &vehicles,
+        &edgelets_of(items),
+        pp,
+        (width, height),
+        s.method,
+        s.min_score,
+        s.bootstrap,
+    )
+    .with_context(|| format!("aggregating {origin}"))
+    .and_then(|agg| agg.into_camera(pp, s.focal_px).map_err(anyhow::Error::msg));
+    let mut file = match &result {
+        Ok((cal, agg)) => aggregated_file(input, cal, agg),
+        Err(e) => CalibrationFile::not_calibrated(input, format!("{e:#}")),
+    };
+    if let Value::Object(m) = settings {
+        file.settings = m;
+    }
+    Ok(RecordsCalibration {
+        file,
+        result,
+        image_size: (width, height),
+    })
+}
+
+/// The per-vehicle records of a run in deep_vp's `VPout` layout (what `--vehicles` writes).
+pub fn vehicle_items(out: &PipelineOutput) -> Vec<VpOutItem> {
+    let (w, h) = (out.info.width, out.info.height);
+    out.records.iter().map(|r| r.to_vpout(w, h)).collect()
 }
 
 /// The calibration file of a run that found no camera, for `reason`.
@@ -262,6 +410,61 @@ pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
     s
 }
 
+/// The tracks of a run, and why they have no speeds when they have none.
+pub fn run_tracks(
+    out: &PipelineOutput,
+    road: Option<(&Calibration, f64)>,
+    calibrated: bool,
+) -> (Vec<VehicleTrack>, TracksHeader) {
+    let settings = TrackSettings::default();
+    let mut header = TracksHeader {
+        input: out.info.path.display().to_string(),
+        fps: out.info.fps.filter(|f| f.is_finite() && *f > 0.0),
+        size: (out.info.width, out.info.height),
+        scale_m_per_unit: road.map(|r| r.1),
+        window_points: settings.window_points,
+        note: None,
+    };
+    let Some(fps) = header.fps else {
+        header.note = Some(
+            "no frame rate: tracks need consecutive frames (a video, or an image folder with \
+             --fps)"
+                .to_string(),
+        );
+        return (Vec::new(), header);
+    };
+    if road.is_none() {
+        header.note = Some(if calibrated {
+            "no metric scale: tracks without road points and speeds (give --scale-points and \
+             --scale-distance)"
+                .to_string()
+        } else {
+            "no calibration: tracks without road points and speeds".to_string()
+        });
+    }
+    let tracks = build_tracks(
+        &out.records,
+        fps,
+        road,
+        (out.info.width, out.info.height),
+        &settings,
+    );
+    (tracks, header)
+}
+
+/// The one-line summary of the tracks.
+pub fn tracks_line(tracks: &[VehicleTrack], header: &TracksHeader) -> String {
+    let (n, with_speed, median) = summary(tracks);
+    let mut line = format!("tracks: {n}, {with_speed} with a speed");
+    if let Some(m) = median {
+        line.push_str(&format!(", median speed {m:.1} km/h"));
+    }
+    if let Some(note) = &header.note {
+        line.push_str(&format!(" ({note})"));
+    }
+    line
+}
+
 /// Write the tracks to `path`: CSV when it ends in `.csv`, else JSON (atomically).
 ///
 /// # Errors
@@ -299,9 +502,7 @@ pub fn write_opencv_yaml(path: &Path, file: &CalibrationFile) -> Result<()> {
 /// # Errors
 /// The file cannot be written.
 pub fn write_vehicles(path: &Path, out: &PipelineOutput) -> Result<()> {
-    let (w, h) = (out.info.width, out.info.height);
-    let items: Vec<VpOutItem> = out.records.iter().map(|r| r.to_vpout(w, h)).collect();
-    write_vpout(path, &items)?;
+    write_vpout(path, &vehicle_items(out))?;
     Ok(())
 }
 

@@ -613,6 +613,47 @@ pub fn run_pipeline_on(
     })
 }
 
+/// The network's VPs for one vehicle box of a picture (see [`predict_boxes`]).
+#[derive(Debug, Clone)]
+pub struct BoxVps {
+    /// The box's index in the boxes given.
+    pub source: usize,
+    /// The crop's box frame (clamped integer box), frame pixels.
+    pub crop_box: BoxPx,
+    /// The decoded network output, box frame.
+    pub prediction: VpPrediction,
+    /// VP1 and VP2 in frame pixels.
+    pub vp1: Point2,
+    pub vp2: Point2,
+}
+
+/// The network's VPs for vehicle `boxes` (any detector's) of one picture, cut and resized as
+/// the pipeline cuts them; boxes that leave no crop inside the picture are left out.
+///
+/// # Errors
+/// A failing crop or network.
+pub fn predict_boxes(net: &VpNet, image: &RgbImage, boxes: &[BoxPx]) -> Result<Vec<BoxVps>> {
+    let mut resizer = CropResizer::new(net.config().input_size as u32, CropFilter::default())?;
+    let batch = resizer.crop_batch(image, boxes)?;
+    if batch.boxes.is_empty() {
+        return Ok(Vec::new());
+    }
+    let preds = net.predict_prepared(&batch.images)?;
+    Ok(batch
+        .source
+        .iter()
+        .zip(&batch.boxes)
+        .zip(preds)
+        .map(|((&source, &crop_box), p)| BoxVps {
+            source,
+            crop_box,
+            vp1: crop_box.frame_from_box(p.vp.vp1),
+            vp2: crop_box.frame_from_box(p.vp.vp2),
+            prediction: p.vp,
+        })
+        .collect())
+}
+
 /// Aggregate the records of `out` into a camera.
 ///
 /// # Errors

@@ -15,9 +15,11 @@
 
 mod ffmpeg;
 mod images;
+mod pictures;
 
 pub use ffmpeg::{probe_video, FfmpegSource, VideoProbe};
 pub use images::ImageSequenceSource;
+pub use pictures::{picture_label, PictureSource};
 
 use std::path::{Path, PathBuf};
 use std::str::FromStr;

@@ -2,13 +2,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
-use vpcal::aggregate::{aggregate, edgelets_of, Method};
-use vpcal::output::{check_destination, write_bcs_system};
+use anyhow::Result;
+use vpcal::aggregate::Method;
+use vpcal::output::{
+    aggregate_records, check_destination, write_bcs_system, RecordSettings, RecordsCalibration,
+};
 use vpcal::pipeline::PrincipalPoint;
-use vpcal_formats::calib::{CalibrationFile, InputSummary};
-use vpcal_formats::reference::{infer_image_size, read_vpout};
-use vpcal_geom::aggregate::VehicleVps;
+use vpcal_formats::reference::read_vpout;
 
 use super::{Exit, UsageError};
 
@@ -64,47 +64,21 @@ pub fn run(args: Args) -> Result<Exit> {
         }
     }
     let items = read_vpout(&args.vpout)?;
-    let (width, height) = match args.image_size {
-        Some(size) => size,
-        None => infer_image_size(&items).map_err(|e| {
-            anyhow::anyhow!(
-                "{}: the frame size is not known: {e}; give it with --image-size WxH",
-                args.vpout.display()
-            )
-        })?,
+    let settings = RecordSettings {
+        method: args.method,
+        pp: args.pp,
+        image_size: args.image_size,
+        min_score: args.min_score,
+        bootstrap: args.bootstrap,
+        focal_px: args.focal,
     };
-    let pp = args.pp.resolve(width, height);
-    let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
-    let input = InputSummary {
-        path: args.vpout.display().to_string(),
-        kind: Some("vehicle_records".to_string()),
-        width,
-        height,
-        vehicle_boxes: items.len() as u64,
-        ..InputSummary::default()
-    };
-    let settings = serde_json::json!({
-        "method": args.method.name(),
-        "min_score": args.min_score,
-        "bootstrap": args.bootstrap,
-        "pp": args.pp.to_json(),
-        "image_size": [width, height],
-        "focal": args.focal,
-    });
-    let result = aggregate(
-        &vehicles,
-        &edgelets_of(&items),
-        pp,
-        (width, height),
-        args.method,
-        args.min_score,
-        args.bootstrap,
-    )
-    .with_context(|| format!("aggregating {}", args.vpout.display()))
-    .and_then(|agg| agg.into_camera(pp, args.focal).map_err(anyhow::Error::msg));
-    let (mut file, exit) = match &result {
+    let RecordsCalibration {
+        file,
+        result,
+        image_size: (width, height),
+    } = aggregate_records(&items, &args.vpout.display().to_string(), &settings)?;
+    let exit = match &result {
         Ok((cal, agg)) => {
-            let file = vpcal::output::aggregated_file(input, cal, agg);
             eprintln!("{}", agg.summary);
             for w in &file.warnings {
                 eprintln!("warning: {w}");
@@ -113,19 +87,13 @@ pub fn run(args: Args) -> Result<Exit> {
                 "f = {:.1} px, vp1 = ({:.2}, {:.2}), vp2 = ({:.2}, {:.2}), {width}x{height} frames",
                 cal.focal_px, cal.vp1.x, cal.vp1.y, cal.vp2.x, cal.vp2.y
             );
-            (file, Exit::Success)
+            Exit::Success
         }
         Err(e) => {
             eprintln!("vpcal: no calibration: {e:#}");
-            (
-                CalibrationFile::not_calibrated(input, format!("{e:#}")),
-                Exit::NotEnoughEvidence,
-            )
+            Exit::NotEnoughEvidence
         }
     };
-    if let serde_json::Value::Object(m) = settings {
-        file.settings = m;
-    }
     if let Some(path) = &args.output {
         file.write(path)?;
     }

@@ -8,12 +8,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Result};
 use vpcal::aggregate::{Aggregated, Method};
 use vpcal::detector::{DetectorChoice, DetectorSettings};
-use vpcal::output::TracksHeader;
 use vpcal::output::{self, check_destination};
 use vpcal::overlay;
 use vpcal::pipeline::{open_input, PipelineConfig, PipelineOutput, PrincipalPoint};
-use vpcal::tracks::{build_tracks, summary, TrackSettings, VehicleTrack};
-use vpcal_formats::calib::ScaleReference;
+use vpcal::road::KnownDistance;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::Point2;
 use vpcal_video::{SourceOptions, Start};
@@ -271,91 +269,6 @@ fn parse_points(s: &str) -> Result<[f64; 4], String> {
     }
 }
 
-/// The metric scale of `cal` from --scale-points/--scale-distance, with its reference.
-fn known_scale(args: &Args, cal: &Calibration) -> Result<Option<(f64, ScaleReference)>> {
-    let (Some(p), Some(distance)) = (args.scale_points, args.scale_distance) else {
-        return Ok(None);
-    };
-    let (p1, p2) = (Point2::new(p[0], p[1]), Point2::new(p[2], p[3]));
-    for q in [p1, p2] {
-        if !cal.sees_road(q) {
-            bail!(
-                "--scale-points: pixel ({}, {}) is above the horizon of the calibration: it does \
-                 not see the road",
-                q.x,
-                q.y
-            );
-        }
-    }
-    let scale = cal.scale_from_distance(p1, p2, distance).ok_or_else(|| {
-        anyhow::anyhow!(
-            "--scale-points: the two pixels coincide on the road (or a ray misses the road plane)"
-        )
-    })?;
-    Ok(Some((
-        scale,
-        ScaleReference {
-            points: [[p1.x, p1.y], [p2.x, p2.y]],
-            distance_m: distance,
-        },
-    )))
-}
-
-/// The tracks of a run, and why they have no speeds when they have none.
-fn run_tracks(
-    out: &PipelineOutput,
-    road: Option<(&Calibration, f64)>,
-    calibrated: bool,
-) -> (Vec<VehicleTrack>, TracksHeader) {
-    let settings = TrackSettings::default();
-    let mut header = TracksHeader {
-        input: out.info.path.display().to_string(),
-        fps: out.info.fps.filter(|f| f.is_finite() && *f > 0.0),
-        size: (out.info.width, out.info.height),
-        scale_m_per_unit: road.map(|r| r.1),
-        window_points: settings.window_points,
-        note: None,
-    };
-    let Some(fps) = header.fps else {
-        header.note = Some(
-            "no frame rate: tracks need consecutive frames (a video, or an image folder with \
-             --fps)"
-                .to_string(),
-        );
-        return (Vec::new(), header);
-    };
-    if road.is_none() {
-        header.note = Some(if calibrated {
-            "no metric scale: tracks without road points and speeds (give --scale-points and \
-             --scale-distance)"
-                .to_string()
-        } else {
-            "no calibration: tracks without road points and speeds".to_string()
-        });
-    }
-    let tracks = build_tracks(
-        &out.records,
-        fps,
-        road,
-        (out.info.width, out.info.height),
-        &settings,
-    );
-    (tracks, header)
-}
-
-/// The one-line summary of the tracks.
-fn tracks_line(tracks: &[VehicleTrack], header: &TracksHeader) -> String {
-    let (n, with_speed, median) = summary(tracks);
-    let mut line = format!("tracks: {n}, {with_speed} with a speed");
-    if let Some(m) = median {
-        line.push_str(&format!(", median speed {m:.1} km/h"));
-    }
-    if let Some(note) = &header.note {
-        line.push_str(&format!(" ({note})"));
-    }
-    line
-}
-
 fn parse_start(s: &str) -> Result<Start, String> {
     s.parse::<Start>().map_err(|e| e.to_string())
 }
@@ -493,22 +406,38 @@ pub fn run(args: Args) -> Result<Exit> {
     };
     match result {
         Ok((cal, agg)) => {
-            let mut doc = output::calibration_file(&out, &config, &cal, &agg);
-            let scale = known_scale(&args, &cal)?;
-            if let Some((s, reference)) = &scale {
-                doc.set_scale(*s, Some(reference.clone()))
-                    .map_err(anyhow::Error::msg)?;
+            let known = args
+                .scale_points
+                .zip(args.scale_distance)
+                .map(|(p, d)| KnownDistance {
+                    p1: Point2::new(p[0], p[1]),
+                    p2: Point2::new(p[2], p[3]),
+                    distance_m: d,
+                });
+            let (doc, scale) = output::calibrated_run_file(&out, &config, &cal, &agg, known)?;
+            if let (Some(s), Some(source)) = (scale, doc.scale_source.as_deref()) {
+                let height = doc.camera_height_m.unwrap_or(f64::NAN);
+                let interval = doc
+                    .scale_interval_m_per_unit
+                    .map(|[lo, hi]| format!(", 68% {lo:.4}-{hi:.4}"))
+                    .unwrap_or_default();
+                eprintln!(
+                    "  {:<22} {s:.4} m per unit ({source}{interval}); camera {height:.1} m above the road",
+                    "scale"
+                );
             }
-            let scale = scale.map(|(s, _)| s);
+            for w in doc.warnings.iter().filter(|w| w.contains("metric scale is automatic")) {
+                eprintln!("warning: {w}");
+            }
             if args.tracks.is_some() || args.bcs_json.is_some() {
-                let (tracks, header) = run_tracks(&out, scale.map(|s| (&cal, s)), true);
+                let (tracks, header) = output::run_tracks(&out, scale.map(|s| (&cal, s)), true);
                 if let Some(path) = &args.tracks {
                     output::write_tracks(path, &header, &tracks)?;
                 }
                 if let Some(path) = &args.bcs_json {
                     output::write_bcs_system_with_tracks(path, &cal, scale, &tracks)?;
                 }
-                say(tracks_line(&tracks, &header));
+                say(output::tracks_line(&tracks, &header));
             }
             if let Some(path) = &args.output {
                 doc.write(path)?;
@@ -534,9 +463,9 @@ pub fn run(args: Args) -> Result<Exit> {
                 doc.write(path)?;
             }
             if let Some(path) = &args.tracks {
-                let (tracks, header) = run_tracks(&out, None, false);
+                let (tracks, header) = output::run_tracks(&out, None, false);
                 output::write_tracks(path, &header, &tracks)?;
-                say(tracks_line(&tracks, &header));
+                say(output::tracks_line(&tracks, &header));
             }
             if let Some(path) = &args.overlay {
                 if let Some(picture) = &out.picture {

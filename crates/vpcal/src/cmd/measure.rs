@@ -5,12 +5,11 @@
 //! points fixes the scale (`scale_m_per_unit`); then any pair of pixels on the road has a
 //! distance in metres.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use serde_json::Value;
-use vpcal_formats::calib::{CalibrationFile, ScaleReference};
-use vpcal_geom::camera::Calibration;
+use vpcal::road::{scale_from_points, RoadCamera};
 use vpcal_geom::Point2;
 
 /// Two road points in pixels, `x1,y1,x2,y2`.
@@ -62,24 +61,6 @@ pub struct MeasureArgs {
     pub json: bool,
 }
 
-/// A calibration file and the camera it describes.
-struct CalibFile {
-    file: CalibrationFile,
-    cal: Calibration,
-    scale: Option<f64>,
-}
-
-fn read_calib(path: &Path) -> Result<CalibFile> {
-    let file = CalibrationFile::read(path)?;
-    let cal = file
-        .camera()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    let scale = file
-        .scale()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    Ok(CalibFile { file, cal, scale })
-}
-
 pub fn run_scale(a: ScaleArgs) -> Result<()> {
     if !(a.distance.is_finite() && a.distance > 0.0) {
         bail!(
@@ -87,31 +68,11 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
             a.distance
         );
     }
-    let mut f = read_calib(&a.calib)?;
+    let mut f = RoadCamera::read(&a.calib)?;
     let PointPair(p1, p2) = a.points;
-    for p in [p1, p2] {
-        if !f.cal.sees_road(p) {
-            bail!(
-                "--points: pixel ({}, {}) is above the horizon: it does not see the road",
-                p.x,
-                p.y
-            );
-        }
-    }
-    let scale = f
-        .cal
-        .scale_from_distance(p1, p2, a.distance)
-        .with_context(|| {
-            "--points: the two pixels coincide on the road (or a ray misses the road plane)"
-        })?;
+    let (scale, reference) = scale_from_points(&f.cal, p1, p2, a.distance, "--points")?;
     f.file
-        .set_scale(
-            scale,
-            Some(ScaleReference {
-                points: [[p1.x, p1.y], [p2.x, p2.y]],
-                distance_m: a.distance,
-            }),
-        )
+        .set_scale(scale, Some(reference))
         .map_err(|e| anyhow::anyhow!("{}: {e}", a.calib.display()))?;
     let out = a.output.as_deref().unwrap_or(&a.calib);
     f.file.write(out)?;
@@ -135,7 +96,7 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
 }
 
 pub fn run_measure(a: MeasureArgs) -> Result<()> {
-    let f = read_calib(&a.calib)?;
+    let f = RoadCamera::read(&a.calib)?;
     if f.scale.is_none() {
         eprintln!(
             "warning: {} has no metric scale (run `vpcal scale`): distances are in road-plane units",
@@ -145,14 +106,7 @@ pub fn run_measure(a: MeasureArgs) -> Result<()> {
     let unit = if f.scale.is_some() { "m" } else { "units" };
     let mut rows = Vec::new();
     for PointPair(p1, p2) in &a.points {
-        let d = if f.cal.sees_road(*p1) && f.cal.sees_road(*p2) {
-            f.cal
-                .road_distance(*p1, *p2)
-                .map(|d| d * f.scale.unwrap_or(1.0))
-        } else {
-            None
-        };
-        rows.push((*p1, *p2, d));
+        rows.push((*p1, *p2, f.distance(*p1, *p2)));
     }
     if a.json {
         let v: Vec<Value> = rows
@@ -191,7 +145,7 @@ pub struct ExportArgs {
 
 pub fn run_export(a: ExportArgs) -> Result<()> {
     vpcal::output::check_destination("--opencv", &a.opencv)?;
-    let mut f = read_calib(&a.calib)?;
+    let mut f = RoadCamera::read(&a.calib)?;
     f.file
         .refresh_export()
         .map_err(|e| anyhow::anyhow!("{}: {e}", a.calib.display()))?;

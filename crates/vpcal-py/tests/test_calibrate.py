@@ -1,0 +1,157 @@
+"""Calibrating footage from Python: a synthetic clip with a known camera, frames in memory
+against the video file, progress reports, the calibration object and its file."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+import vpcal
+
+
+def decode(video) -> np.ndarray:
+    """The clip's frames as FFmpeg decodes them (independently of vpcal), N x H x W x 3."""
+    r = subprocess.run(
+        [
+            "ffmpeg", "-nostdin", "-loglevel", "error", "-noautorotate", "-i", str(video),
+            "-map", "0:v:0", "-an", "-fps_mode", "passthrough",
+            "-f", "rawvideo", "-pix_fmt", "rgb24", "pipe:1",
+        ],
+        capture_output=True,
+        check=True,
+    )
+    return np.frombuffer(r.stdout, dtype=np.uint8).reshape(-1, 240, 320, 3)
+
+
+@pytest.fixture(scope="module")
+def video_cal(scene):
+    calls = []
+    cal = vpcal.calibrate(scene / "video.mp4", progress=lambda *a: calls.append(a))
+    return cal, calls
+
+
+def test_a_synthetic_clip_gives_its_focal_length(video_cal, truth):
+    cal, _ = video_cal
+    assert cal.ok
+    # The edgelets measured it (the prior alone would be 1.38 widths = 441 px, +34 %).
+    assert cal.focal_source == "edgelets"
+    assert abs(cal.focal_px / truth["focal_px"] - 1) < 0.10, (cal.focal_px, truth["focal_px"])
+    assert abs(cal.horizon_angle_deg - truth["horizon_angle_deg"]) < 1.0
+    # The camera's arrays agree with each other and with the file.
+    K = cal.K
+    assert K.shape == (3, 3) and K[0, 0] == pytest.approx(cal.focal_px)
+    assert np.allclose(cal.R @ cal.R.T, np.eye(3), atol=1e-9)
+    assert cal.rvec.shape == (3,) and cal.tvec.shape == (3,)
+    assert cal.image_size == (320, 240)
+    assert np.allclose(K[:2, 2], cal.pp)
+    # The horizon passes through both VPs.
+    a, b, c = cal.horizon
+    for vp in (cal.vp1, cal.vp2):
+        assert abs(a * vp[0] + b * vp[1] + c) < 1e-6 * np.hypot(*vp)
+    assert cal.horizon_y([cal.vp1[0]])[0] == pytest.approx(cal.vp1[1])
+    d = cal.to_dict()
+    assert d["format"] == "vpcal-calibration/2" and d["status"] == "calibrated"
+    assert d["evidence"] == cal.evidence and cal.evidence["method"] == "robust"
+    assert cal.confidence["resamples"] == 30
+    assert isinstance(cal.warnings, list)
+
+
+def test_progress_reports_every_frame(video_cal):
+    _, calls = video_cal
+    done = [c[0] for c in calls]
+    assert done[0] == 0 and done[-1] == 40, done
+    assert done == sorted(done)
+    # The expected number of frames is known for a video; boxes grow.
+    assert all(c[1] == 40 for c in calls)
+    assert calls[-1][2] > 0
+
+
+def test_numpy_frames_and_the_video_give_the_same_calibration(scene, video_cal):
+    cal, _ = video_cal
+    frames = decode(scene / "video.mp4")
+    assert frames.shape == (40, 240, 320, 3)
+
+    class Bar:  # a tqdm-like bar
+        total = None
+        n = 0
+
+        def update(self, k):
+            self.n += k
+
+    bar = Bar()
+    from_list = vpcal.calibrate(list(frames), fps=25, progress=bar)
+    assert bar.n == 40 and bar.total == 40 or bar.total is None
+    from_array = vpcal.calibrate(frames, fps=25)
+    from_generator = vpcal.calibrate((f for f in frames), fps=25)
+    a = cal.to_dict()
+    for other in (from_list, from_array, from_generator):
+        b = other.to_dict()
+        assert b["input"]["path"] == "<frames>"
+        assert b["input"]["frames_processed"] == 40
+        for key in ("focal_px", "K", "R", "vp1", "vp2", "horizon", "opencv", "evidence",
+                    "confidence", "summary", "focal_source", "focal_interval_px", "warnings"):
+            assert b[key] == a[key], key
+        assert b["input"]["vehicle_boxes"] == a["input"]["vehicle_boxes"]
+
+
+def test_the_frame_selection_is_the_clis(scene):
+    frames = decode(scene / "video.mp4")
+    a = vpcal.calibrate(scene / "video.mp4", every=2, start=3, max_frames=15,
+                        detector=f"file:{scene / 'detections.csv'}", bootstrap=0,
+                        raise_on_failure=False).to_dict()
+    b = vpcal.calibrate(frames, fps=25, every=2, start=3, max_frames=15,
+                        detector=f"file:{scene / 'detections.csv'}", bootstrap=0,
+                        raise_on_failure=False).to_dict()
+    assert a["input"]["frames_processed"] == b["input"]["frames_processed"] == 15
+    assert a["input"]["vehicle_boxes"] == b["input"]["vehicle_boxes"] > 0
+    assert a.get("vp1") == b.get("vp1") and a.get("reason") == b.get("reason")
+
+
+def test_bgr_frames_are_flipped(scene):
+    frames = decode(scene / "video.mp4")[:20]
+    rgb = vpcal.calibrate(frames, fps=25, bootstrap=0, raise_on_failure=False).to_dict()
+    bgr = vpcal.calibrate(frames[:, :, :, ::-1], fps=25, bgr=True, bootstrap=0,
+                          raise_on_failure=False).to_dict()
+    assert rgb["input"]["vehicle_boxes"] == bgr["input"]["vehicle_boxes"]
+    assert rgb.get("vp1") == bgr.get("vp1")
+
+
+def test_the_file_saves_and_loads_as_the_cli_writes_it(scene, video_cal, cli, tmp_path):
+    cal, _ = video_cal
+    cal.save(tmp_path / "py.json")
+    back = vpcal.load(tmp_path / "py.json")
+    assert back.to_dict() == cal.to_dict()
+    back.save(tmp_path / "again.json")
+    assert (tmp_path / "again.json").read_bytes() == (tmp_path / "py.json").read_bytes()
+    # The CLI on the same clip writes the same camera (only the run's time differs).
+    r = cli("calibrate", str(scene / "video.mp4"), "-o", str(tmp_path / "cli.json"), "--quiet")
+    assert r.returncode == 0, r.stderr
+    c = json.loads((tmp_path / "cli.json").read_text())
+    p = json.loads((tmp_path / "py.json").read_text())
+    c["input"]["seconds"] = p["input"]["seconds"] = 0
+    assert c == p
+
+
+def test_tracks_and_speeds_with_a_scale(scene, truth):
+    cal = vpcal.calibrate(scene / "video.mp4", tracks=True, vehicles=True, bootstrap=0)
+    assert cal.tracks is not None and cal.tracks_note.startswith("no metric scale")
+    assert all(t.speed_kmh is None for t in cal.tracks)
+    assert len(cal.vehicles) == cal.to_dict()["input"]["vehicle_boxes"]
+    # The scale from the scene's first taped distance.
+    gt = json.loads((scene / "gt_data.json").read_text())
+    m = gt["distanceMeasurement"][0]
+    pts = (*m["p1"][:2], *m["p2"][:2])
+    scaled = vpcal.calibrate(scene / "video.mp4", tracks=True, bootstrap=0,
+                             scale_points=pts, scale_distance=m["distance"])
+    assert scaled.scale is not None and scaled.scale > 0
+    moving = [t for t in scaled.tracks if t.speed_kmh is not None]
+    assert moving, [len(t.frames) for t in scaled.tracks]
+    true_speeds = [c["speed"] for c in gt["cars"]]
+    lo, hi = min(true_speeds), max(true_speeds)
+    med = float(np.median([t.speed_kmh for t in moving]))
+    assert 0.5 * lo < med < 1.5 * hi, (med, lo, hi)
+    t = moving[0]
+    assert t.image_points.shape == (len(t.frames), 2) and t.road_points.shape == t.image_points.shape
