@@ -118,3 +118,123 @@ pub struct KnownDistance {
     pub p2: Point2,
     pub distance_m: f64,
 }
+
+/// What a known measurement on the road says: the distance between two road points, or the
+/// width of a lane (two pixels, one on each of two neighbouring lane lines, anywhere along
+/// them: only the part across the road counts).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RoadMeasure {
+    Distance,
+    LaneWidth,
+}
+
+/// One known measurement for the scale.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScaleInput {
+    pub kind: RoadMeasure,
+    pub known: KnownDistance,
+}
+
+/// The scale of several known measurements and how well each agrees with it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ScaleFit {
+    /// Metres per road unit: the geometric mean of the measurements' own scales.
+    pub scale: f64,
+    /// Per measurement (in the given order): its own scale, and its length with the fitted
+    /// scale minus the known one, metres and percent.
+    pub own_scales: Vec<f64>,
+    pub residuals_m: Vec<f64>,
+    pub residuals_pct: Vec<f64>,
+    /// `distance`, `lane_width`, or `distance_and_lane_width`.
+    pub source: &'static str,
+}
+
+/// The length in road units that measurement `m` measures on `cal`.
+fn measured_units(cal: &Calibration, m: &ScaleInput, flag: &str) -> Result<f64> {
+    let k = m.known;
+    if !(k.distance_m.is_finite() && k.distance_m > 0.0) {
+        bail!(
+            "{flag}: the length {} must be a positive number of metres",
+            k.distance_m
+        );
+    }
+    let (Some(a), Some(b)) = (cal.road_point(k.p1), cal.road_point(k.p2)) else {
+        bail!(
+            "{flag}: pixel ({}, {}) or ({}, {}) is above the horizon of the calibration: it \
+             does not see the road",
+            k.p1.x,
+            k.p1.y,
+            k.p2.x,
+            k.p2.y
+        );
+    };
+    let units = match m.kind {
+        RoadMeasure::Distance => ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
+        RoadMeasure::LaneWidth => (a[1] - b[1]).abs(),
+    };
+    if !(units.is_finite() && units > 0.0) {
+        bail!(
+            "{flag}: the pixels ({}, {}) and ({}, {}) measure nothing on the road{}",
+            k.p1.x,
+            k.p1.y,
+            k.p2.x,
+            k.p2.y,
+            if m.kind == RoadMeasure::LaneWidth {
+                " across it (both on one lane line?)"
+            } else {
+                " (they coincide)"
+            }
+        );
+    }
+    Ok(units)
+}
+
+/// The metric scale from known measurements `inputs` (at least one), with each one's
+/// residual; `flag_of` names the option of measurement `i` in errors.
+///
+/// # Errors
+/// No measurement; a length that is not positive; a pixel above the horizon; pixels that
+/// measure nothing.
+pub fn fit_scale(
+    cal: &Calibration,
+    inputs: &[ScaleInput],
+    flag_of: impl Fn(usize) -> String,
+) -> Result<ScaleFit> {
+    if inputs.is_empty() {
+        bail!("no known distance or lane width to take the scale from");
+    }
+    let units: Vec<f64> = inputs
+        .iter()
+        .enumerate()
+        .map(|(i, m)| measured_units(cal, m, &flag_of(i)))
+        .collect::<Result<_>>()?;
+    let own: Vec<f64> = inputs
+        .iter()
+        .zip(&units)
+        .map(|(m, u)| m.known.distance_m / u)
+        .collect();
+    let scale = (own.iter().map(|s| s.ln()).sum::<f64>() / own.len() as f64).exp();
+    let residuals_m: Vec<f64> = inputs
+        .iter()
+        .zip(&units)
+        .map(|(m, u)| scale * u - m.known.distance_m)
+        .collect();
+    let residuals_pct = residuals_m
+        .iter()
+        .zip(inputs)
+        .map(|(r, m)| 100.0 * r / m.known.distance_m)
+        .collect();
+    let has = |k: RoadMeasure| inputs.iter().any(|m| m.kind == k);
+    let source = match (has(RoadMeasure::Distance), has(RoadMeasure::LaneWidth)) {
+        (true, true) => "distance_and_lane_width",
+        (false, true) => "lane_width",
+        _ => "distance",
+    };
+    Ok(ScaleFit {
+        scale,
+        own_scales: own,
+        residuals_m,
+        residuals_pct,
+        source,
+    })
+}

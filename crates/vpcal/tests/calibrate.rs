@@ -371,6 +371,105 @@ fn write_known_calib(path: &Path) {
 }
 
 #[test]
+fn several_distances_and_lane_widths_give_one_scale_with_residuals() {
+    let dir = tempfile::tempdir().unwrap();
+    let calib = dir.path().join("calib.json");
+    write_known_calib(&calib);
+    let c = calib.to_str().unwrap();
+    let json = |r: &std::process::Output| -> serde_json::Value {
+        assert!(r.status.success(), "{}", text(r));
+        serde_json::from_slice(&r.stdout).unwrap()
+    };
+    let v = json(&vpcal(&[
+        "scale",
+        c,
+        "--points",
+        "600,500,700,650",
+        "--distance",
+        "12.5",
+        "--json",
+    ]));
+    let s1 = v["scale_m_per_unit"].as_f64().unwrap();
+    // A second distance and two road points, in metres with that scale.
+    let m = json(&vpcal(&[
+        "measure",
+        c,
+        "--points",
+        "300,600,900,640",
+        "--at",
+        "500,550",
+        "--at",
+        "800,560",
+        "--json",
+    ]));
+    let d2 = m[0]["distance"].as_f64().unwrap();
+    let (a, b) = (&m[1]["road"], &m[2]["road"]);
+    assert_eq!(m[1]["unit"], "m");
+    let across = (a[1].as_f64().unwrap() - b[1].as_f64().unwrap()).abs();
+    let along = a[0].as_f64().unwrap();
+    assert!(along > 0.0, "{m}");
+    let ground = m[1]["ground_distance"].as_f64().unwrap();
+    assert!((ground - along.hypot(a[1].as_f64().unwrap())).abs() < 1e-9);
+    // The second distance 2 % long: the scale is the geometric mean, each residual about 1 %.
+    let d2s = format!("{}", d2 * 1.02);
+    let v = json(&vpcal(&[
+        "scale",
+        c,
+        "--points",
+        "600,500,700,650",
+        "--distance",
+        "12.5",
+        "--points",
+        "300,600,900,640",
+        "--distance",
+        &d2s,
+        "--json",
+    ]));
+    let s = v["scale_m_per_unit"].as_f64().unwrap();
+    assert!((s / (s1 * 1.02f64.sqrt()) - 1.0).abs() < 1e-9, "{v}");
+    let r = &v["measurements"];
+    assert!(
+        (r[0]["residual_pct"].as_f64().unwrap() - 0.995).abs() < 0.01,
+        "{v}"
+    );
+    assert!(
+        (r[1]["residual_pct"].as_f64().unwrap() + 0.985).abs() < 0.01,
+        "{v}"
+    );
+    assert_eq!(v["scale_source"], "distance");
+    // A lane width alone: only the part across the road counts, whatever the pixels' place
+    // along it.
+    let v = json(&vpcal(&[
+        "scale",
+        c,
+        "--lane-points",
+        "500,550,800,560",
+        "--lane-width",
+        &format!("{}", across * 1.02f64.sqrt()),
+        "--json",
+    ]));
+    let s3 = v["scale_m_per_unit"].as_f64().unwrap();
+    assert!((s3 / s1 - 1.02f64.sqrt()).abs() < 1e-9, "{s3} vs {s1}");
+    assert_eq!(read_json(&calib)["scale_source"], "lane_width");
+    // Counts that do not pair up are refused, and leave the file alone.
+    let before = std::fs::read(&calib).unwrap();
+    let r = vpcal(&["scale", c, "--points", "600,500,700,650"]);
+    assert!(!r.status.success());
+    assert!(text(&r).contains("--distance"), "{}", text(&r));
+    let r = vpcal(&[
+        "scale",
+        c,
+        "--lane-points",
+        "500,550,500,550",
+        "--lane-width",
+        "3.5",
+    ]);
+    assert!(!r.status.success());
+    assert!(text(&r).contains("across"), "{}", text(&r));
+    assert_eq!(std::fs::read(&calib).unwrap(), before);
+}
+
+#[test]
 fn scale_then_measure_gives_metres_on_the_road() {
     let dir = tempfile::tempdir().unwrap();
     let calib = dir.path().join("calib.json");
@@ -500,7 +599,10 @@ fn demo_renders_calibrates_and_compares_with_the_truth() {
     // said so, with an interval that holds the truth.
     assert_eq!(doc.focal_source.as_deref(), Some("prior"));
     let [lo, hi] = doc.focal_interval_px.unwrap();
-    assert!(lo < demo.true_focal_px && demo.true_focal_px < hi, "{lo}-{hi}");
+    assert!(
+        lo < demo.true_focal_px && demo.true_focal_px < hi,
+        "{lo}-{hi}"
+    );
     assert!(demo.focal_error_pct.abs() < 15.0, "{demo:?}");
     assert!(demo.horizon_angle_error_deg.abs() < 4.0, "{demo:?}");
     assert!(demo.bcs_ratio_error_pct.mean < 8.0, "{demo:?}");
@@ -654,7 +756,11 @@ fn calibrate_writes_tracks_and_bcs_cars_that_eval_speed_measures() {
         "--quiet",
     ]);
     assert_eq!(r.status.code(), Some(0), "{}", text(&r));
-    assert!(text(&r).contains("metric scale is automatic"), "{}", text(&r));
+    assert!(
+        text(&r).contains("metric scale is automatic"),
+        "{}",
+        text(&r)
+    );
     let auto = read_json(&calib);
     assert_eq!(auto["scale_source"], "vehicles");
     let s = auto["scale_m_per_unit"].as_f64().unwrap();

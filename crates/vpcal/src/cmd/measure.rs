@@ -1,15 +1,17 @@
 //! `vpcal scale` and `vpcal measure`: metric distances on the road plane of a calibration.
 //!
 //! A calibration from vanishing points fixes the road plane up to scale (DESIGN.md §3: the
-//! BrnoCompSpeed back-projection onto `n·X + 10 = 0`). One known distance between two road
-//! points fixes the scale (`scale_m_per_unit`); then any pair of pixels on the road has a
-//! distance in metres.
+//! BrnoCompSpeed back-projection onto `n·X + 10 = 0`). Known distances between road points,
+//! or lane widths, fix the scale (`scale_m_per_unit`; several: their geometric mean, each
+//! with its residual); then any pair of pixels on the road has a distance in metres, and any
+//! road pixel a place on the road.
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use serde_json::Value;
-use vpcal::road::{scale_from_points, RoadCamera};
+use vpcal::road::{fit_scale, KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
+use vpcal_formats::calib::ScaleReference;
 use vpcal_geom::Point2;
 
 /// Two road points in pixels, `x1,y1,x2,y2`.
@@ -35,12 +37,20 @@ fn parse_pair(s: &str) -> Result<PointPair, String> {
 pub struct ScaleArgs {
     /// A calibration written by `vpcal calibrate -o`.
     pub calib: PathBuf,
-    /// The two ends of the known distance, in pixels, on the road: x1,y1,x2,y2.
+    /// The two ends of a known distance, in pixels, on the road: x1,y1,x2,y2; repeat for
+    /// several (each with its --distance, in the same order).
     #[arg(long, value_parser = parse_pair, allow_hyphen_values = true)]
-    pub points: PointPair,
-    /// The distance between them on the road, in metres.
+    pub points: Vec<PointPair>,
+    /// The distance between the --points on the road, metres; one per --points.
     #[arg(long)]
-    pub distance: f64,
+    pub distance: Vec<f64>,
+    /// Two pixels on two neighbouring lane lines, x1,y1,x2,y2, anywhere along them (only the
+    /// part across the road counts); repeat for several lanes.
+    #[arg(long, value_parser = parse_pair, allow_hyphen_values = true)]
+    pub lane_points: Vec<PointPair>,
+    /// The lane width, metres: one for every --lane-points, or one per --lane-points.
+    #[arg(long)]
+    pub lane_width: Vec<f64>,
     /// Write the scaled calibration here (default: update CALIB in place, atomically).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
@@ -54,43 +64,150 @@ pub struct MeasureArgs {
     /// A calibration written by `vpcal calibrate -o` (with `vpcal scale` for metres).
     pub calib: PathBuf,
     /// Pixel pairs on the road, x1,y1,x2,y2; repeat for several distances.
-    #[arg(long, value_parser = parse_pair, required = true, allow_hyphen_values = true)]
+    #[arg(long, value_parser = parse_pair, required_unless_present = "at", allow_hyphen_values = true)]
     pub points: Vec<PointPair>,
+    /// A road pixel, x,y: where it is on the road (x along the road towards VP1, y across,
+    /// from the point under the camera) and how far from the camera's foot; repeat for
+    /// several.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub at: Vec<Point2>,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
 }
 
-pub fn run_scale(a: ScaleArgs) -> Result<()> {
-    if !(a.distance.is_finite() && a.distance > 0.0) {
-        bail!(
-            "--distance {} must be a positive number of metres",
-            a.distance
-        );
+fn parse_point(s: &str) -> Result<Point2, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .ok_or_else(|| format!("expected x,y (finite numbers), got {s:?}"))?;
+    let [x, y] = v[..] else {
+        return Err(format!("expected 2 numbers x,y, got {} in {s:?}", v.len()));
+    };
+    Ok(Point2::new(x, y))
+}
+
+/// The known measurements of `a`, in the order distances then lane widths.
+fn scale_inputs(a: &ScaleArgs) -> Result<Vec<ScaleInput>> {
+    if a.points.len() != a.distance.len() {
+        return Err(super::UsageError(format!(
+            "{} --points but {} --distance: give one distance per pair of points",
+            a.points.len(),
+            a.distance.len()
+        ))
+        .into());
     }
+    let widths: Vec<f64> = match (a.lane_points.len(), a.lane_width.len()) {
+        (n, 1) => vec![a.lane_width[0]; n],
+        (n, m) if n == m => a.lane_width.clone(),
+        (n, m) => {
+            return Err(super::UsageError(format!(
+                "{n} --lane-points but {m} --lane-width: give one width for all, or one per \
+                 pair of points"
+            ))
+            .into())
+        }
+    };
+    let known = |PointPair(p1, p2): &PointPair, d: f64| KnownDistance {
+        p1: *p1,
+        p2: *p2,
+        distance_m: d,
+    };
+    let mut inputs: Vec<ScaleInput> = a
+        .points
+        .iter()
+        .zip(&a.distance)
+        .map(|(p, d)| ScaleInput {
+            kind: RoadMeasure::Distance,
+            known: known(p, *d),
+        })
+        .collect();
+    inputs.extend(a.lane_points.iter().zip(&widths).map(|(p, w)| ScaleInput {
+        kind: RoadMeasure::LaneWidth,
+        known: known(p, *w),
+    }));
+    if inputs.is_empty() {
+        return Err(super::UsageError(
+            "no known length: give --points with --distance, or --lane-points with --lane-width"
+                .into(),
+        )
+        .into());
+    }
+    Ok(inputs)
+}
+
+pub fn run_scale(a: ScaleArgs) -> Result<()> {
+    let inputs = scale_inputs(&a)?;
     let mut f = RoadCamera::read(&a.calib)?;
-    let PointPair(p1, p2) = a.points;
-    let (scale, reference) = scale_from_points(&f.cal, p1, p2, a.distance, "--points")?;
+    let n_dist = a.points.len();
+    let fit = fit_scale(&f.cal, &inputs, |i| {
+        if i < n_dist {
+            format!("--points #{}", i + 1)
+        } else {
+            format!("--lane-points #{}", i - n_dist + 1)
+        }
+    })?;
+    let reference = inputs
+        .iter()
+        .find(|m| m.kind == RoadMeasure::Distance)
+        .map(|m| ScaleReference {
+            points: [[m.known.p1.x, m.known.p1.y], [m.known.p2.x, m.known.p2.y]],
+            distance_m: m.known.distance_m,
+        });
     f.file
-        .set_scale(scale, Some(reference))
+        .set_scale(fit.scale, reference)
         .map_err(|e| anyhow::anyhow!("{}: {e}", a.calib.display()))?;
+    f.file.scale_source = Some(fit.source.to_string());
     let out = a.output.as_deref().unwrap_or(&a.calib);
     f.file.write(out)?;
     let height = f.file.camera_height_m.unwrap_or(f64::NAN);
+    let kind = |k: RoadMeasure| match k {
+        RoadMeasure::Distance => "distance",
+        RoadMeasure::LaneWidth => "lane_width",
+    };
     if a.json {
+        let rows: Vec<Value> = inputs
+            .iter()
+            .enumerate()
+            .map(|(i, m)| {
+                serde_json::json!({
+                    "kind": kind(m.kind),
+                    "points": [[m.known.p1.x, m.known.p1.y], [m.known.p2.x, m.known.p2.y]],
+                    "known_m": m.known.distance_m,
+                    "own_scale": fit.own_scales[i],
+                    "residual_m": fit.residuals_m[i],
+                    "residual_pct": fit.residuals_pct[i],
+                })
+            })
+            .collect();
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
-                "scale_m_per_unit": scale,
+                "scale_m_per_unit": fit.scale,
+                "scale_source": fit.source,
                 "camera_height_m": height,
+                "measurements": rows,
                 "output": out.display().to_string(),
             }))?
         );
     } else {
         println!(
-            "scale {scale:.6} m per road unit (camera {height:.2} m above the road) -> {}",
+            "scale {:.6} m per road unit (camera {height:.2} m above the road) -> {}",
+            fit.scale,
             out.display()
         );
+        if inputs.len() > 1 {
+            for (i, m) in inputs.iter().enumerate() {
+                println!(
+                    "  {:<10} {:>8.3} m known, {:>+8.3} m ({:+.1} %) with this scale",
+                    kind(m.kind),
+                    m.known.distance_m,
+                    fit.residuals_m[i],
+                    fit.residuals_pct[i]
+                );
+            }
+        }
     }
     Ok(())
 }
@@ -108,13 +225,23 @@ pub fn run_measure(a: MeasureArgs) -> Result<()> {
     for PointPair(p1, p2) in &a.points {
         rows.push((*p1, *p2, f.distance(*p1, *p2)));
     }
+    let places: Vec<(Point2, Option<[f64; 2]>)> =
+        a.at.iter().map(|p| (*p, f.road_point(*p))).collect();
     if a.json {
-        let v: Vec<Value> = rows
+        let mut v: Vec<Value> = rows
             .iter()
             .map(|(p1, p2, d)| {
                 serde_json::json!({"points": [[p1.x, p1.y], [p2.x, p2.y]], "distance": d, "unit": unit})
             })
             .collect();
+        v.extend(places.iter().map(|(p, q)| {
+            serde_json::json!({
+                "at": [p.x, p.y],
+                "road": q,
+                "ground_distance": q.map(|q| q[0].hypot(q[1])),
+                "unit": unit,
+            })
+        }));
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         for (p1, p2, d) in &rows {
@@ -126,6 +253,23 @@ pub fn run_measure(a: MeasureArgs) -> Result<()> {
                 None => println!(
                     "({:.1}, {:.1}) - ({:.1}, {:.1}): not on the road (above the horizon)",
                     p1.x, p1.y, p2.x, p2.y
+                ),
+            }
+        }
+        for (p, q) in &places {
+            match q {
+                Some(q) => println!(
+                    "({:.1}, {:.1}): {:.3} {unit} along the road, {:.3} {unit} across, {:.3} {unit} \
+                     from the point under the camera",
+                    p.x,
+                    p.y,
+                    q[0],
+                    q[1],
+                    q[0].hypot(q[1])
+                ),
+                None => println!(
+                    "({:.1}, {:.1}): not on the road (above the horizon)",
+                    p.x, p.y
                 ),
             }
         }
