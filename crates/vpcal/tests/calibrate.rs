@@ -770,3 +770,51 @@ fn calibrate_writes_tracks_and_bcs_cars_that_eval_speed_measures() {
     assert!(lo < s && s < hi, "{lo}-{hi}");
     assert!(auto["road_homography"].is_array());
 }
+
+/// A scene without speed ground truth (a curve: no measurement lines) is skipped, with the
+/// reason, not an error for the whole evaluation.
+#[test]
+fn eval_speed_skips_scenes_without_measurement_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("curve");
+    let r = vpcal(&[
+        "synth",
+        "scene",
+        "--layout",
+        "curve",
+        "--frames",
+        "10",
+        "--frames-dir",
+        "--no-video",
+        "--width",
+        "320",
+        "--height",
+        "180",
+        "--seed",
+        "2",
+        "--out",
+        root.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", text(&r));
+    let r = vpcal(&[
+        "eval",
+        "speed",
+        "--dataset",
+        root.join("dataset").to_str().unwrap(),
+        "--results",
+        root.join("results").to_str().unwrap(),
+        "--system",
+        "groundtruth",
+        "--image-size",
+        "320x180",
+        "--json",
+    ]);
+    assert_eq!(r.status.code(), Some(0), "{}", text(&r));
+    let v: serde_json::Value = serde_json::from_str(&common::stdout(&r)).unwrap();
+    assert_eq!(v[0]["skipped"], 1, "{v}");
+    assert_eq!(v[0]["videos"][0]["status"], "skipped");
+    assert!(v[0]["videos"][0]["reason"]
+        .as_str()
+        .unwrap()
+        .contains("measurementLines"));
+}

@@ -776,7 +776,8 @@ impl SpeedCamera {
 #[derive(Debug, Clone, Serialize)]
 pub struct SpeedVideoResult {
     pub video: String,
-    /// `ok`, `missing` (no system file) or `invalid` (no camera or scale).
+    /// `ok`, `missing` (no system file), `invalid` (no camera or scale) or `skipped` (no
+    /// speed ground truth).
     pub status: &'static str,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
@@ -800,6 +801,9 @@ pub struct SpeedSystemResult {
     pub evaluated: usize,
     pub missing: usize,
     pub invalid: usize,
+    /// Videos without speed ground truth (fewer than 2 measurement lines: a curve, a
+    /// junction).
+    pub skipped: usize,
 }
 
 /// The ground-truth file of a video directory (the one `read_gt` reads), for messages.
@@ -828,6 +832,15 @@ fn speed_video(
         scale: None,
         speed: None,
     };
+    if gt.measurement_lines.len() < 2 {
+        r.status = "skipped";
+        r.reason = Some(format!(
+            "no speed ground truth: {} measurementLines in {} (2 needed)",
+            gt.measurement_lines.len(),
+            gt_file(dir).display()
+        ));
+        return Ok(r);
+    }
     let Some(system) = read_system_opt(system_path)? else {
         return Ok(r);
     };
@@ -929,6 +942,7 @@ pub fn evaluate_speed(args: &SpeedArgs) -> Result<Vec<SpeedSystemResult>> {
             evaluated: count("ok"),
             missing: count("missing"),
             invalid: count("invalid"),
+            skipped: count("skipped"),
             videos: rows,
         });
     }
@@ -998,6 +1012,11 @@ fn run_speed(args: &SpeedArgs) -> Result<()> {
                     sp.false_positives,
                 ),
                 (None, "missing") => println!("{:<18} missing (no system file)", v.video),
+                (None, "skipped") => println!(
+                    "{:<18} skipped: {}",
+                    v.video,
+                    v.reason.as_deref().unwrap_or("no speed ground truth")
+                ),
                 (None, _) => println!(
                     "{:<18} invalid: {}",
                     v.video,
