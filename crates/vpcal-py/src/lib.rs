@@ -334,13 +334,7 @@ impl PyPictures {
     fn picture(item: &Bound<'_, PyAny>) -> PyResult<RgbImage> {
         let t = item.cast::<PyTuple>()?;
         let (h, w, data): (u32, u32, Bound<'_, PyBytes>) = t.extract()?;
-        RgbImage::from_raw(w, h, data.as_bytes().to_vec()).ok_or_else(|| {
-            PyValueError::new_err(format!(
-                "a frame of {w}x{h} pixels needs {} bytes, got {}",
-                u64::from(w) * u64::from(h) * 3,
-                data.as_bytes().len()
-            ))
-        })
+        picture(h, w, data.as_bytes())
     }
 }
 

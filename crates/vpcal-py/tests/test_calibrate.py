@@ -137,8 +137,12 @@ def test_the_file_saves_and_loads_as_the_cli_writes_it(scene, video_cal, cli, tm
 
 def test_tracks_and_speeds_with_a_scale(scene, truth):
     cal = vpcal.calibrate(scene / "video.mp4", tracks=True, vehicles=True, bootstrap=0)
-    assert cal.tracks is not None and cal.tracks_note.startswith("no metric scale")
-    assert all(t.speed_kmh is None for t in cal.tracks)
+    assert cal.tracks is not None
+    if cal.scale is None:
+        assert cal.tracks_note.startswith("no metric scale")
+        assert all(t.speed_kmh is None for t in cal.tracks)
+    else:  # the automatic scale, from the vehicles' sizes
+        assert cal.to_dict()["scale_source"] == "vehicles" and cal.tracks_note is None
     assert len(cal.vehicles) == cal.to_dict()["input"]["vehicle_boxes"]
     # The scale from the scene's first taped distance.
     gt = json.loads((scene / "gt_data.json").read_text())
@@ -147,6 +151,7 @@ def test_tracks_and_speeds_with_a_scale(scene, truth):
     scaled = vpcal.calibrate(scene / "video.mp4", tracks=True, bootstrap=0,
                              scale_points=pts, scale_distance=m["distance"])
     assert scaled.scale is not None and scaled.scale > 0
+    assert scaled.to_dict().get("scale_source", "distance") == "distance"
     moving = [t for t in scaled.tracks if t.speed_kmh is not None]
     assert moving, [len(t.frames) for t in scaled.tracks]
     true_speeds = [c["speed"] for c in gt["cars"]]
