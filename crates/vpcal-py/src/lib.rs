@@ -20,7 +20,7 @@ use vpcal::detector::{DetectorChoice, DetectorSettings};
 use vpcal::output::{self, RecordSettings};
 use vpcal::pipeline::{PipelineConfig, PipelineOutput, PrincipalPoint};
 use vpcal::progress::{FrameProgress, Progress};
-use vpcal::road::{KnownDistance, RoadCamera};
+use vpcal::road::{KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
 use vpcal_formats::calib::CalibrationFile;
 use vpcal_formats::json::Json;
 use vpcal_formats::reference::{read_vpout, vpout_from_json, VpOutItem};
@@ -492,24 +492,44 @@ fn write_calibration(text: &str, path: PathBuf) -> PyResult<()> {
     file.write(&path).map_err(|e| err(e.into()))
 }
 
-/// The calibration file JSON text `text` with the metric scale of a known road distance
-/// (`vpcal scale`).
+/// A known length on the road: two pixels `(x1, y1, x2, y2)` and metres.
+type KnownLength = ((f64, f64, f64, f64), f64);
+
+/// The calibration file JSON text `text` with the metric scale of known road `distances` and
+/// lane `widths` (as `vpcal scale --points/--distance --lane-points/--lane-width`: their
+/// geometric mean); returns the file and the scale's source.
 #[pyfunction]
-fn set_scale(text: &str, points: (f64, f64, f64, f64), distance: f64) -> PyResult<String> {
+#[pyo3(signature = (text, distances, widths=Vec::new()))]
+fn set_scale(
+    text: &str,
+    distances: Vec<KnownLength>,
+    widths: Vec<KnownLength>,
+) -> PyResult<String> {
     let mut cam =
         RoadCamera::new(calibration_from_text(text, "calibration")?, "calibration").map_err(err)?;
-    let (x1, y1, x2, y2) = points;
-    let (scale, reference) = vpcal::road::scale_from_points(
-        &cam.cal,
-        Point2::new(x1, y1),
-        Point2::new(x2, y2),
-        distance,
-        "points",
-    )
-    .map_err(err)?;
-    cam.file
-        .set_scale(scale, Some(reference))
-        .map_err(|e| VpcalError::new_err(format!("calibration: {e}")))?;
+    let input = |kind: RoadMeasure, ((x1, y1, x2, y2), m): KnownLength| ScaleInput {
+        kind,
+        known: KnownDistance {
+            p1: Point2::new(x1, y1),
+            p2: Point2::new(x2, y2),
+            distance_m: m,
+        },
+    };
+    let n = distances.len();
+    let mut inputs: Vec<ScaleInput> = distances
+        .into_iter()
+        .map(|d| input(RoadMeasure::Distance, d))
+        .collect();
+    inputs.extend(widths.into_iter().map(|w| input(RoadMeasure::LaneWidth, w)));
+    let flag = |i: usize| {
+        if i < n {
+            format!("--points #{}", i + 1)
+        } else {
+            format!("--lane-points #{}", i - n + 1)
+        }
+    };
+    cam.fit_and_set_scale(&inputs, flag, "calibration")
+        .map_err(err)?;
     Ok(cam.file.to_json_string())
 }
 

@@ -71,6 +71,16 @@ def test_road_points_and_distances_match_vpcal_measure(vpout, cli, tmp_path):
     scaled.save(tmp_path / "py_scaled.json")
     assert (tmp_path / "py_scaled.json").read_bytes() == (tmp_path / "scaled.json").read_bytes()
     assert scaled.distances([ref])[0] == pytest.approx(12.5, rel=1e-12)
+    # A distance and a lane width: their geometric mean, as the CLI's.
+    lane = (800.0, 1000.0, 1200.0, 1000.0)
+    r = cli("scale", str(tmp_path / "calib.json"), "--points", ",".join(map(str, ref)),
+            "--distance", "12.5", "--lane-points", ",".join(map(str, lane)), "--lane-width",
+            "3.5", "-o", str(tmp_path / "scaled2.json"))
+    assert r.returncode == 0, r.stderr
+    both = cal.with_scale(ref, 12.5, lane_widths=[(lane, 3.5)])
+    both.save(tmp_path / "py_scaled2.json")
+    assert (tmp_path / "py_scaled2.json").read_bytes() == (tmp_path / "scaled2.json").read_bytes()
+    assert both.to_dict()["scale_source"] == "distance_and_lane_width"
 
     pairs = [(100.0, 1000.0, 1800.0, 950.0), (960.0, 600.0, 960.0, 1079.0),
              (500.0, 800.0, 520.0, 820.0), (960.0, -400.0, 960.0, 1000.0)]

@@ -63,6 +63,34 @@ impl RoadCamera {
         self.cal.road_point(p).map(|q| [q[0] * s, q[1] * s])
     }
 
+    /// Fit the metric scale of `inputs` (as `vpcal scale`: [`fit_scale`]) and put it into the
+    /// file: the scale, the first known distance as its reference, and its source. `flag_of`
+    /// names measurement `i` in errors; `origin` the file.
+    ///
+    /// # Errors
+    /// As [`fit_scale`]; a scale the file refuses.
+    pub fn fit_and_set_scale(
+        &mut self,
+        inputs: &[ScaleInput],
+        flag_of: impl Fn(usize) -> String,
+        origin: &str,
+    ) -> Result<ScaleFit> {
+        let fit = fit_scale(&self.cal, inputs, flag_of)?;
+        let reference = inputs
+            .iter()
+            .find(|m| m.kind == RoadMeasure::Distance)
+            .map(|m| ScaleReference {
+                points: [[m.known.p1.x, m.known.p1.y], [m.known.p2.x, m.known.p2.y]],
+                distance_m: m.known.distance_m,
+            });
+        self.file
+            .set_scale(fit.scale, reference)
+            .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
+        self.file.scale_source = Some(fit.source.to_string());
+        self.scale = Some(fit.scale);
+        Ok(fit)
+    }
+
     /// The pixel that sees road-frame point `q` (the inverse of [`RoadCamera::road_point`]);
     /// `None` behind the camera.
     pub fn pixel(&self, q: [f64; 2]) -> Option<Point2> {

@@ -651,13 +651,34 @@ class Calibration:
             self._camera = _native.RoadCamera(self._text())
         return self._camera
 
-    def with_scale(self, points: Sequence[float], distance: float) -> "Calibration":
-        """A copy with the metric scale of one known road distance, as ``vpcal scale``:
-        ``points`` (x1, y1, x2, y2) pixels, ``distance`` metres."""
-        p = tuple(float(v) for v in points)
-        if len(p) != 4:
-            raise ValueError(f"points: expected x1, y1, x2, y2 (4 numbers), got {len(p)}")
-        text = _native.set_scale(self._text(), p, float(distance))
+    def with_scale(
+        self,
+        points: Optional[Sequence[float]] = None,
+        distance: Optional[float] = None,
+        *,
+        distances: Sequence[Tuple[Sequence[float], float]] = (),
+        lane_widths: Sequence[Tuple[Sequence[float], float]] = (),
+    ) -> "Calibration":
+        """A copy with the metric scale of known lengths on the road, as ``vpcal scale``:
+        ``points`` (x1, y1, x2, y2 pixels) ``distance`` metres apart, more such pairs in
+        ``distances``, and ``lane_widths``: pairs of pixels on two neighbouring lane lines
+        with the lane's width (only the part across the road counts). Several give their
+        geometric mean."""
+        def pair(p: Sequence[float], name: str) -> Tuple[float, float, float, float]:
+            t = tuple(float(v) for v in p)
+            if len(t) != 4:
+                raise ValueError(f"{name}: expected x1, y1, x2, y2 (4 numbers), got {len(t)}")
+            return t  # type: ignore[return-value]
+
+        known = [(pair(p, "distances"), float(d)) for p, d in distances]
+        if (points is None) != (distance is None):
+            raise TypeError("with_scale: points and distance go together")
+        if points is not None:
+            known.insert(0, (pair(points, "points"), float(distance)))  # type: ignore[arg-type]
+        widths = [(pair(p, "lane_widths"), float(w)) for p, w in lane_widths]
+        if not known and not widths:
+            raise TypeError("with_scale: give points and distance, distances or lane_widths")
+        text = _native.set_scale(self._text(), known, widths)
         return Calibration(json.loads(text), tracks=self._tracks, vehicles=self.vehicles)
 
     def road_points(self, pixels: Any) -> np.ndarray:

@@ -46,8 +46,11 @@ def read_calibration(path: str) -> str:
 def write_calibration(text: str, path: str) -> None:
     """Write calibration file JSON text to ``path`` as the CLI writes it."""
 
-def set_scale(text: str, points: Tuple[float, float, float, float], distance: float) -> str:
-    """The calibration with the metric scale of a known road distance (``vpcal scale``)."""
+KnownLength = Tuple[Tuple[float, float, float, float], float]
+
+def set_scale(text: str, distances: List[KnownLength], widths: List[KnownLength] = ...) -> str:
+    """The calibration with the metric scale of known road distances and lane widths
+    (``vpcal scale``)."""
 
 class RoadCamera:
     def __init__(self, text: str) -> None: ...

@@ -10,8 +10,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use serde_json::Value;
-use vpcal::road::{fit_scale, KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
-use vpcal_formats::calib::ScaleReference;
+use vpcal::road::{KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
 use vpcal_geom::Point2;
 
 /// Two road points in pixels, `x1,y1,x2,y2`.
@@ -141,24 +140,17 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
     let inputs = scale_inputs(&a)?;
     let mut f = RoadCamera::read(&a.calib)?;
     let n_dist = a.points.len();
-    let fit = fit_scale(&f.cal, &inputs, |i| {
-        if i < n_dist {
-            format!("--points #{}", i + 1)
-        } else {
-            format!("--lane-points #{}", i - n_dist + 1)
-        }
-    })?;
-    let reference = inputs
-        .iter()
-        .find(|m| m.kind == RoadMeasure::Distance)
-        .map(|m| ScaleReference {
-            points: [[m.known.p1.x, m.known.p1.y], [m.known.p2.x, m.known.p2.y]],
-            distance_m: m.known.distance_m,
-        });
-    f.file
-        .set_scale(fit.scale, reference)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", a.calib.display()))?;
-    f.file.scale_source = Some(fit.source.to_string());
+    let fit = f.fit_and_set_scale(
+        &inputs,
+        |i| {
+            if i < n_dist {
+                format!("--points #{}", i + 1)
+            } else {
+                format!("--lane-points #{}", i - n_dist + 1)
+            }
+        },
+        &a.calib.display().to_string(),
+    )?;
     let out = a.output.as_deref().unwrap_or(&a.calib);
     f.file.write(out)?;
     let height = f.file.camera_height_m.unwrap_or(f64::NAN);
