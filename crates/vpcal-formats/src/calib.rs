@@ -196,7 +196,8 @@ pub struct CalibrationFile {
     /// `given` (`--focal`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focal_source: Option<String>,
-    /// 68 % interval of the focal length, pixels: the bootstrap's for measured focal lengths,
+    /// 68 % interval of the focal length, pixels: the bootstrap's spread and the model error
+    /// (`vpcal::aggregate::MEASURED_FOCAL_MODEL_LOG_SD`) for measured focal lengths,
     /// the plausible range of traffic cameras (15-90° views) for assumed ones.
     #[serde(default)]
     pub focal_interval_px: Option<[f64; 2]>,
