@@ -168,7 +168,13 @@ fn kitti_cars_give_the_metric_scale() {
     let Some(dir) = real_data("real/kitti_object") else {
         return;
     };
-    let o = vpcal(&["eval", "kitti-scale", "--data", dir.to_str().unwrap(), "--json"]);
+    let o = vpcal(&[
+        "eval",
+        "kitti-scale",
+        "--data",
+        dir.to_str().unwrap(),
+        "--json",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     let own = &v["own_dimensions"];

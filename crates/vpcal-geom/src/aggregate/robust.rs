@@ -783,9 +783,7 @@ impl Vp2Model<'_> {
                 let mut predicted = vec![0.0; self.prep.centre.len()];
                 let n_f = if self.fixed_ln_f.is_some() { 1 } else { 48 };
                 for i in 0..n_f {
-                    let ln_f = self
-                        .fixed_ln_f
-                        .unwrap_or(lo + (hi - lo) * i as f64 / 47.0);
+                    let ln_f = self.fixed_ln_f.unwrap_or(lo + (hi - lo) * i as f64 / 47.0);
                     for j in 0..n_roll {
                         let roll = -roll_max + 2.0 * roll_max * j as f64 / (n_roll - 1) as f64;
                         // The ray directions depend on (f, roll) only; the bias loop reuses them.

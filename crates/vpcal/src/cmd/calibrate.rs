@@ -426,7 +426,11 @@ pub fn run(args: Args) -> Result<Exit> {
                     "scale"
                 );
             }
-            for w in doc.warnings.iter().filter(|w| w.contains("metric scale is automatic")) {
+            for w in doc
+                .warnings
+                .iter()
+                .filter(|w| w.contains("metric scale is automatic"))
+            {
                 eprintln!("warning: {w}");
             }
             if args.tracks.is_some() || args.bcs_json.is_some() {
