@@ -112,26 +112,13 @@ pub fn scale_from_points(
     distance_m: f64,
     flag: &str,
 ) -> Result<(f64, ScaleReference)> {
-    if !(distance_m.is_finite() && distance_m > 0.0) {
-        bail!("{flag}: the distance {distance_m} must be a positive number of metres");
-    }
-    for q in [p1, p2] {
-        if !cal.sees_road(q) {
-            bail!(
-                "{flag}: pixel ({}, {}) is above the horizon of the calibration: it does not \
-                 see the road",
-                q.x,
-                q.y
-            );
-        }
-    }
-    let scale = cal.scale_from_distance(p1, p2, distance_m).ok_or_else(|| {
-        anyhow::anyhow!(
-            "{flag}: the two pixels coincide on the road (or a ray misses the road plane)"
-        )
-    })?;
+    let input = ScaleInput {
+        kind: RoadMeasure::Distance,
+        known: KnownDistance { p1, p2, distance_m },
+    };
+    let fit = fit_scale(cal, &[input], |_| flag.to_string())?;
     Ok((
-        scale,
+        fit.scale,
         ScaleReference {
             points: [[p1.x, p1.y], [p2.x, p2.y]],
             distance_m,
