@@ -46,6 +46,10 @@ pub struct AugmentConfig {
     pub min_crop_px: f64,
     /// Random draws before falling back to the un-warped crop.
     pub max_tries: u32,
+    /// Probability of each sensor effect (exposure and colour, blur, low resolution, noise,
+    /// JPEG; [`crate::sensor`]); 0 (the paper) applies none.
+    #[serde(default)]
+    pub sensor_probability: f64,
 }
 
 impl AugmentConfig {
@@ -59,6 +63,16 @@ impl AugmentConfig {
             filter: Resample::Bicubic,
             min_crop_px: 12.5,
             max_tries: 4,
+            sensor_probability: 0.0,
+        }
+    }
+
+    /// The paper's settings plus the sensor effects of real cameras, each with p = 0.3
+    /// (sim-to-real for synthetic crops).
+    pub fn real() -> AugmentConfig {
+        AugmentConfig {
+            sensor_probability: 0.3,
+            ..AugmentConfig::paper()
         }
     }
 
@@ -77,16 +91,18 @@ impl AugmentConfig {
             perspective_sigma_px: 0.0,
             box_jitter_px: 0.0,
             flip_probability: 0.0,
+            sensor_probability: 0.0,
             output_size,
             ..AugmentConfig::paper()
         }
     }
 
-    /// A preset by name: `paper`, `reference` or `none` (= [`AugmentConfig::evaluation`] at
-    /// 128 px).
+    /// A preset by name: `paper`, `reference`, `real` (the paper's plus sensor effects) or
+    /// `none` (= [`AugmentConfig::evaluation`] at 128 px).
     pub fn preset(name: &str) -> Option<AugmentConfig> {
         match name {
             "paper" => Some(AugmentConfig::paper()),
+            "real" => Some(AugmentConfig::real()),
             "reference" => Some(AugmentConfig::reference()),
             "none" => Some(AugmentConfig::evaluation(128)),
             _ => None,
@@ -94,7 +110,7 @@ impl AugmentConfig {
     }
 
     /// Names accepted by [`AugmentConfig::preset`].
-    pub const PRESETS: [&'static str; 3] = ["paper", "reference", "none"];
+    pub const PRESETS: [&'static str; 4] = ["paper", "reference", "real", "none"];
 
     /// Check that every value is usable.
     ///
@@ -121,6 +137,12 @@ impl AugmentConfig {
         }
         if self.output_size == 0 {
             return Err("augmentation output_size must be > 0".into());
+        }
+        if !(0.0..=1.0).contains(&self.sensor_probability) {
+            return Err(format!(
+                "augmentation sensor_probability must be in [0, 1], got {}",
+                self.sensor_probability
+            ));
         }
         Ok(())
     }
@@ -346,6 +368,7 @@ pub fn augment<R: Rng + ?Sized>(
     let image = warp::render(&sample.image, size, cfg.filter, |q| {
         inverse.apply(Point2::new(crop.x0 + q.x * sx, crop.y0 + q.y * sy))
     });
+    let image = crate::sensor::sensor_effects(image, cfg.sensor_probability, rng);
     let to_out = |p: Point2| [(p.x - crop.x0) / sx, (p.y - crop.y0) / sy];
     let bb3d = draw.bb3d.map(to_out);
     let tight = hull(&draw.bb3d);

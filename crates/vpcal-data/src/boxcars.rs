@@ -308,6 +308,7 @@ impl BoxCars {
             bb3d: inst.bb3d_in_frame.map(rel),
             vp1: rel(cam.vp1),
             vp2: rel(cam.vp2),
+            label_weight: crate::EXACT_LABELS,
         })
     }
 }

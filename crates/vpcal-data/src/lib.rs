@@ -21,9 +21,12 @@ pub mod augment;
 pub mod boxcars;
 pub mod pipeline;
 pub mod preview;
+pub mod sensor;
 mod sample;
 mod source;
 pub mod warp;
 
-pub use sample::{Sample, SampleId, Split, BB3D_EDGES_VERTICAL, BB3D_EDGES_VP1, BB3D_EDGES_VP2};
-pub use source::{Batch, DataError, SampleSource};
+pub use sample::{
+    Sample, SampleId, Split, BB3D_EDGES_VERTICAL, BB3D_EDGES_VP1, BB3D_EDGES_VP2, EXACT_LABELS,
+};
+pub use source::{channel_weights, Batch, ConcatSource, DataError, SampleSource};

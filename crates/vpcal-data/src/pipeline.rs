@@ -260,6 +260,7 @@ impl Worker {
             vp1_box: Vec::with_capacity(indices.len()),
             vp2_box: Vec::with_capacity(indices.len()),
             ids: Vec::with_capacity(indices.len()),
+            weights: Vec::with_capacity(indices.len() * cfg.codec.channels()),
         };
         let mut skipped = Vec::new();
         for &index in indices {
@@ -305,6 +306,10 @@ impl Worker {
             batch.vp1_box.push(a.vp1_box.as_array());
             batch.vp2_box.push(a.vp2_box.as_array());
             batch.ids.push(sample.id);
+            batch.weights.extend(crate::source::channel_weights(
+                sample.label_weight,
+                cfg.codec.channels(),
+            ));
             batch.size += 1;
         }
         Ok((batch, skipped))

@@ -23,7 +23,14 @@ pub struct Sample {
     pub vp1: [f64; 2],
     /// Second vanishing point (parallel to the road, orthogonal to VP1), crop pixels. Finite.
     pub vp2: [f64; 2],
+    /// How much the VP1 and VP2 labels are trusted, in [0, 1]: the weight of each VP's
+    /// heatmaps in the loss. [`EXACT_LABELS`] for rendered or 3D-annotated vehicles; lower for
+    /// self-labelled real footage, whose VPs come from an estimated camera (`vpcal label`).
+    pub label_weight: [f32; 2],
 }
+
+/// The label weights of a sample whose VPs are exact (BoxCars116k, the renderer).
+pub const EXACT_LABELS: [f32; 2] = [1.0, 1.0];
 
 /// Corner pairs of [`Sample::bb3d`] whose edges run along the vehicle's length: their images
 /// meet at VP1.

@@ -257,6 +257,7 @@ prop_compose! {
             bb3d,
             vp1: [vp1.0, vp1.1],
             vp2: [vp2.0, vp2.1],
+            label_weight: vpcal_data::EXACT_LABELS,
         }
     }
 }

@@ -111,9 +111,20 @@ pub fn to_vec<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, NetError> {
 
 /// MSE of every stack's heatmaps against the targets, `[stacks]`; with `fg_weight > 0` each
 /// pixel's squared error is weighted by `1 + fg_weight * target`, so the few pixels of the
-/// Gaussian peaks are not drowned by the empty background.
-fn heatmap_losses(outs: Vec<Tensor<4>>, targets: Tensor<4>, fg_weight: f64) -> Tensor<1> {
-    let weights = (fg_weight > 0.0).then(|| targets.clone().mul_scalar(fg_weight).add_scalar(1.0));
+/// Gaussian peaks are not drowned by the empty background. `labels`, when given, weighs each
+/// heatmap by its sample's label weight (`Batch::weights`, shape `[b, k]`).
+fn heatmap_losses(
+    outs: Vec<Tensor<4>>,
+    targets: Tensor<4>,
+    fg_weight: f64,
+    labels: Option<Tensor<4>>,
+) -> Tensor<1> {
+    let fg = (fg_weight > 0.0).then(|| targets.clone().mul_scalar(fg_weight).add_scalar(1.0));
+    let weights = match (fg, labels) {
+        (Some(fg), Some(l)) => Some(fg * l),
+        (None, Some(l)) => Some(l),
+        (fg, None) => fg,
+    };
     let terms: Vec<Tensor<1>> = outs
         .into_iter()
         .map(|o| {
@@ -125,6 +136,24 @@ fn heatmap_losses(outs: Vec<Tensor<4>>, targets: Tensor<4>, fg_weight: f64) -> T
         })
         .collect();
     Tensor::cat(terms, 0) // [stacks]
+}
+
+/// The batch's label weights spread over each heatmap, `[b, k, r, r]`; `None` when every
+/// label is exact (the loss is then exactly the unweighted one).
+fn label_weights_tensor(batch: &Batch, device: &Device) -> Option<Tensor<4>> {
+    if !batch.is_weighted() {
+        return None;
+    }
+    let r = batch.heatmap_res;
+    let plane = r * r;
+    let mut w = Vec::with_capacity(batch.weights.len() * plane);
+    for &v in &batch.weights {
+        w.extend(std::iter::repeat_n(v, plane));
+    }
+    Some(Tensor::from_data(
+        TensorData::new(w, [batch.size, batch.channels, r, r]),
+        device,
+    ))
 }
 
 fn targets_tensor(batch: &Batch, device: &Device) -> Tensor<4> {
@@ -196,7 +225,8 @@ impl VpNetwork for StackedHourglass {
     ) -> Tensor<1> {
         let device = images.device();
         let targets = targets_tensor(batch, &device); // [b, k, r, r]
-        heatmap_losses(self.forward(images), targets, fg_weight)
+        let labels = label_weights_tensor(batch, &device);
+        heatmap_losses(self.forward(images), targets, fg_weight, labels)
     }
 
     fn evaluate(
@@ -210,7 +240,7 @@ impl VpNetwork for StackedHourglass {
         let targets = targets_tensor(batch, &device);
         let outs = self.forward(images);
         let last = outs.last().cloned();
-        let terms = to_vec(heatmap_losses(outs, targets, 0.0))?;
+        let terms = to_vec(heatmap_losses(outs, targets, 0.0, None))?;
         if let Some(last) = last {
             let heat = to_vec(last)?;
             let codec = config.codec();

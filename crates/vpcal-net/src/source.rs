@@ -160,6 +160,7 @@ impl ToySource {
             vp1_box,
             vp2_box,
             ids,
+            weights: vec![1.0; indices.len() * channels],
         }
     }
 

@@ -277,6 +277,37 @@ impl<N: VpNetwork> Trainer<N> {
         Self::with_model(config, out, &device, model)
     }
 
+    /// A new run in `out` whose model starts from the weights in `weights` (fine-tuning a
+    /// trained model, e.g. the bundled one, on new data). `config.model` must be the file's own
+    /// model config ([`WeightsFile::config`]).
+    ///
+    /// # Errors
+    /// As [`Trainer::new`], and [`NetError::Weights`] when the file's tensors or config do not
+    /// match `config.model`.
+    pub fn from_weights(
+        config: TrainConfig<N::Config>,
+        out: &Path,
+        device: &Device,
+        weights: &WeightsFile,
+    ) -> Result<Self, NetError> {
+        N::validate_config(&config.model)?;
+        if let Some(stored) = weights.config::<N::Config>()? {
+            if stored != config.model {
+                return Err(NetError::Weights {
+                    path: weights.path().to_path_buf(),
+                    message: format!(
+                        "the file's model config {stored:?} differs from the run's {:?}",
+                        config.model
+                    ),
+                });
+            }
+        }
+        let device = device.clone().autodiff();
+        device.seed(config.seed);
+        let model = weights.load_into(N::init(&config.model, &device))?;
+        Self::with_model(config, out, &device, model)
+    }
+
     /// A new run in `out` starting from the given model (e.g. for fine-tuning, or to start
     /// two runs from identical weights).
     ///

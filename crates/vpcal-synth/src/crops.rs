@@ -304,6 +304,7 @@ impl CropGenerator {
                 bb3d: r.bb3d,
                 vp1: r.vp1,
                 vp2: r.vp2,
+                label_weight: vpcal_data::EXACT_LABELS,
             },
             jpeg,
             meta,

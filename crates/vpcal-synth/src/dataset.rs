@@ -24,7 +24,87 @@ pub struct SampleRecord {
     pub vp1: [f64; 2],
     pub vp2: [f64; 2],
     pub box2d: [f64; 4],
-    pub meta: CropMeta,
+    /// Loss weights of the VP1 and VP2 labels in [0, 1]; absent (exact, `[1, 1]`) for
+    /// rendered crops.
+    #[serde(default = "exact_labels", skip_serializing_if = "is_exact")]
+    pub label_weight: [f32; 2],
+    pub meta: SampleMeta,
+}
+
+fn exact_labels() -> [f32; 2] {
+    vpcal_data::EXACT_LABELS
+}
+
+fn is_exact(w: &[f32; 2]) -> bool {
+    *w == vpcal_data::EXACT_LABELS
+}
+
+/// Where a crop came from: the renderer, or real footage labelled by `vpcal label`.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum SampleMeta {
+    Synthetic(CropMeta),
+    Real(RealMeta),
+}
+
+/// Provenance and label quality of a self-labelled crop of real footage (`vpcal label`).
+///
+/// Its VPs come from the camera that `vpcal label` estimated for the whole clip: VP1 from the
+/// vehicles' straight tracks, VP2 from that VP1, the horizon and the focal length. The label
+/// uncertainties are direction errors at the box centre, degrees, and set `label_weight`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RealMeta {
+    /// The footage file the crop was cut from.
+    pub source: String,
+    /// Camera name (the footage's file stem); whole cameras are held out for validation.
+    pub camera: String,
+    /// Frame index in the footage.
+    pub frame: u64,
+    /// Track (vehicle) index within the footage.
+    pub track: u64,
+    /// Detector score of the box.
+    pub score: f32,
+    /// The detector's box, frame pixels `[x0, y0, x1, y1]`.
+    pub det_box: [f64; 4],
+    /// Frame pixel of the crop's top-left corner.
+    pub crop_origin: [f64; 2],
+    pub frame_size: [u32; 2],
+    /// The estimated camera: focal length (px), where it came from, principal point.
+    pub focal_px: f64,
+    pub focal_source: String,
+    pub pp: [f64; 2],
+    /// Uncertainty of the VP1 label's direction at the box centre, degrees.
+    pub vp1_sd_deg: f64,
+    /// Uncertainty of the VP2 label's direction at the box centre, degrees.
+    pub vp2_sd_deg: f64,
+}
+
+/// Write a crop directory's `FORMAT.md`, `config.json` (the writer's own description, with
+/// `format` and `version` keys) and, last, `samples.jsonl` for crops whose JPEGs are already
+/// in `dir/images/`.
+///
+/// # Errors
+/// I/O errors naming the file.
+pub fn write_index(
+    dir: &Path,
+    config: &serde_json::Value,
+    records: &[SampleRecord],
+) -> Result<(), SynthError> {
+    write_atomic(&dir.join("FORMAT.md"), FORMAT_MD.as_bytes())?;
+    let format_err = |path: PathBuf, e: serde_json::Error| SynthError::Format {
+        path,
+        message: e.to_string(),
+    };
+    let cfg = serde_json::to_vec_pretty(config).map_err(|e| format_err(dir.join("config.json"), e))?;
+    write_atomic(&dir.join("config.json"), &cfg)?;
+    let mut lines = String::new();
+    for r in records {
+        lines.push_str(
+            &serde_json::to_string(r).map_err(|e| format_err(dir.join("samples.jsonl"), e))?,
+        );
+        lines.push('\n');
+    }
+    write_atomic(&dir.join("samples.jsonl"), lines.as_bytes())
 }
 
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
@@ -103,7 +183,8 @@ pub fn record_of(c: &CropSample) -> SampleRecord {
         vp1: s.vp1,
         vp2: s.vp2,
         box2d: [h.0, h.1, h.2, h.3],
-        meta: c.meta.clone(),
+        label_weight: s.label_weight,
+        meta: SampleMeta::Synthetic(c.meta.clone()),
     }
 }
 
@@ -166,6 +247,20 @@ pub fn read_records(dir: &Path) -> Result<Vec<SampleRecord>, DataError> {
             .chain(&rec.vp1)
             .chain(&rec.vp2)
             .all(|v| v.is_finite());
+        let weights_ok = rec
+            .label_weight
+            .iter()
+            .all(|w| w.is_finite() && (0.0..=1.0).contains(w));
+        if !weights_ok {
+            return Err(DataError::File {
+                path: path.clone(),
+                message: format!(
+                    "line {}: label_weight must hold two numbers in [0, 1], found {:?}",
+                    n + 1,
+                    rec.label_weight
+                ),
+            });
+        }
         if !finite {
             return Err(DataError::File {
                 path: path.clone(),
@@ -226,6 +321,7 @@ impl vpcal_data::SampleSource for CropDirSource {
             bb3d: rec.bb3d,
             vp1: rec.vp1,
             vp2: rec.vp2,
+            label_weight: rec.label_weight,
         })
     }
 }

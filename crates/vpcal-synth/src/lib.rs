@@ -69,6 +69,6 @@ pub mod view;
 pub mod world;
 
 pub use crops::{CropConfig, CropGenerator, CropSample, SynthCropSource};
-pub use dataset::{write_crops, CropDirSource};
+pub use dataset::{write_crops, write_index, CropDirSource, RealMeta, SampleMeta, SampleRecord};
 pub use error::SynthError;
 pub use realbg::RealBackground;

@@ -12,6 +12,7 @@
 //! - [`model`]: the bundled VP network.
 //! - [`progress`]: progress reports of long work.
 //! - [`road`]: metric measurements on the road plane (scale, road points, distances).
+//! - [`label`]: self-labelled training crops from real footage (`vpcal label`).
 //!
 //! The building blocks live in the other crates of the workspace: geometry and aggregation
 //! (`vpcal-geom`), file formats (`vpcal-formats`, with the calibration file type), the network
@@ -21,6 +22,7 @@ pub mod aggregate;
 pub mod autoscale;
 pub mod detector;
 pub mod kitti;
+pub mod label;
 pub mod model;
 pub mod output;
 pub mod overlay;

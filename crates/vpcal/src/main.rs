@@ -44,6 +44,8 @@ enum Command {
     /// Synthetic data: training crops, traffic scenes with ground truth, benchmark suite.
     #[command(subcommand)]
     Synth(cmd::synth::SynthCommand),
+    /// Label the vehicles of real footage with its calibrated camera's VPs (training crops).
+    Label(cmd::label::Args),
     /// Train the VP network (or a regression baseline) with checkpoints and exact resume.
     Train(cmd::train::Args),
     /// Predict the VPs of vehicle crops with trained weights; writes heatmap PNGs.
@@ -59,6 +61,7 @@ fn main() -> std::process::ExitCode {
         Command::Calibrate(args) => return exit_code(cmd::calibrate::run(args)),
         Command::Demo(args) => return exit_code(cmd::demo::run(args)),
         Command::Aggregate(args) => return exit_code(cmd::aggregate::run(args)),
+        Command::Label(args) => return exit_code(cmd::label::run(args)),
         Command::Detect(args) => cmd::detect::run(args),
         Command::Scale(args) => cmd::measure::run_scale(args),
         Command::Measure(args) => cmd::measure::run_measure(args),

@@ -10,6 +10,7 @@ pub mod demo;
 pub mod detect;
 pub mod eval;
 pub mod kitti;
+pub mod label;
 pub mod measure;
 pub mod predict;
 pub mod synth;

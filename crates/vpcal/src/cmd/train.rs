@@ -37,10 +37,17 @@ pub enum LossArg {
 #[derive(Debug, ClapArgs)]
 pub struct Args {
     /// Training data: `boxcars:DIR` (BoxCars116k), `synth:N` (N synthetic crops rendered on
-    /// the fly), `synth-crops:DIR` (crops written by `vpcal synth crops`), `toy:N` (N toy crops
-    /// of line segments, a smoke test). Defaults to the run's own source with --resume.
+    /// the fly), `synth-crops:DIR` (crops written by `vpcal synth crops` or self-labelled real
+    /// crops written by `vpcal label`), `toy:N` (N toy crops of line segments, a smoke test).
+    /// Several sources are joined with `+` (e.g. `synth-crops:SYN+synth-crops:REAL`; not
+    /// `synth` or `toy`). Defaults to the run's own source with --resume.
     #[arg(long, value_name = "KIND:ARG")]
     pub data: Option<String>,
+    /// Start a new run from these weights (fine-tuning, e.g.
+    /// `models/default/model.safetensors`): the model's size comes from the file, --preset is
+    /// ignored. Heatmap networks only.
+    #[arg(long, value_name = "WEIGHTS", conflicts_with = "resume")]
+    pub init: Option<PathBuf>,
     /// Run folder: checkpoints, metrics.csv/jsonl, curves.png.
     #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     pub out: PathBuf,
@@ -113,6 +120,9 @@ fn open_data(
     seed: u64,
     workers: Option<usize>,
 ) -> Result<Box<dyn BatchSource>> {
+    if spec.contains('+') {
+        return open_joined(spec, input_size, codec, augment, seed, workers);
+    }
     let Some((kind, arg)) = spec.split_once(':') else {
         bail!("--data {spec:?}: expected KIND:ARG, e.g. boxcars:/data/BoxCars116k or toy:256");
     };
@@ -177,6 +187,60 @@ fn open_data(
             "--data {spec:?}: unknown data kind {other:?} (supported: boxcars, synth, synth-crops, toy)"
         ),
     }
+}
+
+/// One sample source of a split named by a `KIND:ARG` part of a joined `--data`.
+fn open_part(part: &str, split: Split) -> Result<Arc<dyn SampleSource>> {
+    match part.split_once(':') {
+        Some(("boxcars", _)) => super::data::open_source(part, split),
+        Some(("synth-crops", dir)) => {
+            let dir = Path::new(dir);
+            let s = vpcal_synth::CropDirSource::open(dir, split)
+                .with_context(|| format!("opening the crops in {}", dir.display()))?;
+            Ok(Arc::new(s))
+        }
+        _ => bail!(
+            "--data part {part:?}: only boxcars:DIR and synth-crops:DIR can be joined with '+'"
+        ),
+    }
+}
+
+/// `--data A+B+...`: the parts' training splits read as one, and their validation splits.
+fn open_joined(
+    spec: &str,
+    input_size: usize,
+    codec: HeatmapCodec,
+    augment: &str,
+    seed: u64,
+    workers: Option<usize>,
+) -> Result<Box<dyn BatchSource>> {
+    let aug = AugmentConfig::preset(augment).with_context(|| {
+        format!(
+            "unknown --augment {augment:?}: expected one of {}",
+            AugmentConfig::PRESETS.join(", ")
+        )
+    })?;
+    let parts: Vec<&str> = spec.split('+').collect();
+    let join = |split: Split| -> Result<Arc<dyn SampleSource>> {
+        let sources = parts
+            .iter()
+            .map(|p| open_part(p, split))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Arc::new(vpcal_data::ConcatSource::new(sources)?))
+    };
+    let mut p = PipelineSource::new(
+        spec,
+        join(Split::Train)?,
+        Some(join(Split::Validation)?),
+        aug,
+        input_size,
+        codec,
+        seed,
+    )?;
+    if let Some(w) = workers {
+        p = p.with_workers(w);
+    }
+    Ok(Box::new(p))
 }
 
 fn fmt_err(v: f64) -> String {
@@ -285,6 +349,14 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
             a.seed,
             a.workers,
         )?;
+        let init = a
+            .init
+            .as_deref()
+            .map(|path| {
+                vpcal_net::store::WeightsFile::read(path)
+                    .with_context(|| format!("reading --init {}", path.display()))
+            })
+            .transpose()?;
         let mut tc = TrainConfig::new::<N>(model);
         tc.batch_size = a.batch;
         tc.schedule = schedule(a, a.epochs.unwrap_or(75), a.lr);
@@ -298,8 +370,11 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
             bail!("--fg-weight {fg_weight}: expected a finite weight >= 0");
         }
         tc.fg_weight = fg_weight;
-        let t = Trainer::<N>::new(tc, &a.out, &device)
-            .with_context(|| format!("starting a run in {}", a.out.display()))?;
+        let t = match &init {
+            Some(w) => Trainer::<N>::from_weights(tc, &a.out, &device, w),
+            None => Trainer::<N>::new(tc, &a.out, &device),
+        }
+        .with_context(|| format!("starting a run in {}", a.out.display()))?;
         (t, source)
     };
     let trainer = trainer.with_progress(!a.quiet);
@@ -322,7 +397,24 @@ pub fn run(a: Args) -> Result<()> {
         LossArg::Nl2 => NormLoss::L2,
     };
     match a.arch {
-        Arch::Heatmap => run_arch::<StackedHourglass>(&a, ModelConfig::preset(&a.preset)?),
+        Arch::Heatmap => {
+            let model = match &a.init {
+                Some(path) => vpcal_net::store::WeightsFile::read(path)
+                    .with_context(|| format!("reading --init {}", path.display()))?
+                    .config::<ModelConfig>()?
+                    .with_context(|| {
+                        format!(
+                            "--init {}: the file has no model config in its metadata",
+                            path.display()
+                        )
+                    })?,
+                None => ModelConfig::preset(&a.preset)?,
+            };
+            run_arch::<StackedHourglass>(&a, model)
+        }
+        Arch::Resnet50 | Arch::HourglassPool if a.init.is_some() => {
+            bail!("--init: fine-tuning is for the heatmap network (--arch heatmap) only")
+        }
         Arch::Resnet50 | Arch::HourglassPool => {
             let backbone = if a.arch == Arch::Resnet50 {
                 "resnet50"

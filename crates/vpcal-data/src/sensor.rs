@@ -1,0 +1,139 @@
+//! Sensor and photometric augmentation: what real traffic cameras do to a picture and the
+//! renderer does not (sim-to-real for synthetic crops; also varies real crops).
+//!
+//! Each effect is applied independently with the same probability `p`, in the order a camera
+//! would: exposure and colour (gain, offset, white balance, saturation), optics (Gaussian
+//! blur), resolution (down-sampling then up-sampling back), sensor noise (Gaussian), and
+//! compression (JPEG at a low quality). Geometry is untouched: the VPs stay exact.
+//!
+//! The ranges cover what the real corpus shows (`../shared/data/traffic_corpus`: 320x240
+//! webcams with heavy compression, hazy motorway webcams, night scenes, telephoto blur):
+//! gain 0.55-1.45, offset ±30, per-channel gain ±12 %, saturation 0.3-1.2, blur σ 0.3-1.6 px,
+//! down-sampling by 1.5-3.5, noise σ 2-10 (8-bit levels), JPEG quality 15-70.
+
+use image::{ImageBuffer, Rgb, RgbImage};
+use rand::Rng;
+
+/// Apply each sensor effect with probability `p` (0 returns the image unchanged and draws
+/// nothing from `rng`).
+pub fn sensor_effects<R: Rng + ?Sized>(image: RgbImage, p: f64, rng: &mut R) -> RgbImage {
+    if p <= 0.0 {
+        return image;
+    }
+    let mut img = image;
+    if rng.random::<f64>() < p {
+        img = exposure(&img, rng);
+    }
+    if rng.random::<f64>() < p {
+        let sigma = rng.random_range(0.3..1.6);
+        img = image::imageops::blur(&img, sigma);
+    }
+    if rng.random::<f64>() < p {
+        img = low_resolution(&img, rng.random_range(1.5..3.5));
+    }
+    if rng.random::<f64>() < p {
+        let sigma = rng.random_range(2.0..10.0);
+        add_noise(&mut img, sigma, rng);
+    }
+    if rng.random::<f64>() < p {
+        let quality = rng.random_range(15..=70u8);
+        if let Some(j) = jpeg_round_trip(&img, quality) {
+            img = j;
+        }
+    }
+    img
+}
+
+fn exposure<R: Rng + ?Sized>(img: &RgbImage, rng: &mut R) -> RgbImage {
+    let gain = rng.random_range(0.55..1.45);
+    let offset = rng.random_range(-30.0..30.0);
+    let wb = [
+        rng.random_range(0.88..1.12),
+        rng.random_range(0.88..1.12),
+        rng.random_range(0.88..1.12),
+    ];
+    let sat: f64 = rng.random_range(0.3..1.2);
+    ImageBuffer::from_fn(img.width(), img.height(), |x, y| {
+        let p = img.get_pixel(x, y).0.map(f64::from);
+        let grey = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2];
+        let mut out = [0u8; 3];
+        for c in 0..3 {
+            let v = (grey + sat * (p[c] - grey)) * gain * wb[c] + offset;
+            out[c] = v.round().clamp(0.0, 255.0) as u8;
+        }
+        Rgb(out)
+    })
+}
+
+fn low_resolution(img: &RgbImage, factor: f64) -> RgbImage {
+    let (w, h) = img.dimensions();
+    let small_w = ((f64::from(w) / factor).round() as u32).max(2);
+    let small_h = ((f64::from(h) / factor).round() as u32).max(2);
+    let small = image::imageops::resize(img, small_w, small_h, image::imageops::FilterType::Triangle);
+    image::imageops::resize(&small, w, h, image::imageops::FilterType::Triangle)
+}
+
+fn add_noise<R: Rng + ?Sized>(img: &mut RgbImage, sigma: f64, rng: &mut R) {
+    for v in img.iter_mut() {
+        // Box-Muller.
+        let u1: f64 = 1.0 - rng.random::<f64>();
+        let u2: f64 = rng.random::<f64>();
+        let n = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+        *v = (f64::from(*v) + sigma * n).round().clamp(0.0, 255.0) as u8;
+    }
+}
+
+fn jpeg_round_trip(img: &RgbImage, quality: u8) -> Option<RgbImage> {
+    let mut bytes = Vec::new();
+    let encoder = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality);
+    img.write_with_encoder(encoder).ok()?;
+    image::load_from_memory_with_format(&bytes, image::ImageFormat::Jpeg)
+        .ok()
+        .map(|d| d.to_rgb8())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn gradient() -> RgbImage {
+        ImageBuffer::from_fn(64, 64, |x, y| Rgb([(x * 4) as u8, (y * 4) as u8, 128]))
+    }
+
+    #[test]
+    fn probability_zero_changes_nothing_and_draws_nothing() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let img = gradient();
+        assert_eq!(sensor_effects(img.clone(), 0.0, &mut rng), img);
+        let mut fresh = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        assert_eq!(rng.random::<u64>(), fresh.random::<u64>());
+    }
+
+    #[test]
+    fn every_effect_keeps_the_size_and_changes_the_pixels() {
+        let img = gradient();
+        for seed in 0..8 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let out = sensor_effects(img.clone(), 1.0, &mut rng);
+            assert_eq!(out.dimensions(), img.dimensions());
+            assert_ne!(out, img, "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn low_resolution_removes_fine_detail() {
+        // A one-pixel checkerboard averages out to grey when down-sampled by 2 or more.
+        let board = ImageBuffer::from_fn(32, 32, |x, y| {
+            if (x + y) % 2 == 0 {
+                Rgb([255u8, 255, 255])
+            } else {
+                Rgb([0u8, 0, 0])
+            }
+        });
+        let out = low_resolution(&board, 3.0);
+        let contrast = out.pixels().map(|p| i32::from(p.0[0])).max().unwrap()
+            - out.pixels().map(|p| i32::from(p.0[0])).min().unwrap();
+        assert!(contrast < 128, "{contrast}");
+    }
+}

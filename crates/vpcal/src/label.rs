@@ -1,0 +1,667 @@
+//! Self-labelled training crops from real footage (`vpcal label`).
+//!
+//! BoxCars116k, the paper's training set, was labelled automatically: each camera was
+//! calibrated (Dubská et al.) and every vehicle seen by it got that camera's VPs. This module
+//! does the same with any footage of a straight road:
+//!
+//! ```text
+//! footage -> pipeline + robust aggregation (VP1 from straight tracks, horizon roll and f from
+//!   edgelets or the prior) -> gates (refuse what cannot be labelled confidently)
+//!   -> tracks of moving vehicles that head for VP1 -> every vehicle box on them gets the
+//!   camera's VP1 and VP2 -> crops with a margin, VPs in crop pixels, label weights
+//! ```
+//!
+//! - **Why one VP pair serves every vehicle**: on a straight road every vehicle drives along
+//!   it, so its length axis is the road's direction (VP1) and its axle axis the road's
+//!   horizontal cross direction (VP2). A vehicle that changes lanes or turns is not: tracks
+//!   whose line misses VP1 by more than [`LabelSettings::max_track_angle_deg`] are dropped.
+//! - **Gates** (a refusal names the first that failed): the camera calibrates; VP1 comes from
+//!   at least [`LabelSettings::min_track_lines`] straight tracks that agree to
+//!   [`LabelSettings::max_track_residual_deg`]; the road is not called curved; the horizon's
+//!   bootstrap spread is at most [`LabelSettings::max_horizon_sd_deg`]. The input must be
+//!   consecutive frames (a video, or a folder with `--fps`): stills have no tracks.
+//! - **Label quality** ([`label_uncertainty`]): the direction of each label at the box centre
+//!   is uncertain by `sd1` for VP1 (the median angle of the straight tracks to VP1: how well
+//!   one track's heading is known; VP1's bootstrap spread in pixels is not used, since for a
+//!   distant VP1 it lies along the line of sight and hardly turns the direction) and
+//!   `sd2` for VP2 (how far the VP2 direction turns across the focal length's 68 % interval,
+//!   and the horizon's roll spread). An assumed focal length has a wide interval, so near VP2s
+//!   get low weights, far ones (nearly the horizon's direction whatever f) keep theirs. The
+//!   loss weight is `1 / (1 + (sd / sd0)²)` with `sd0` = [`LABEL_SD0_DEG`].
+//! - **Crops**: the detector's box grown by [`LabelSettings::margin`] on each side (the
+//!   training augmentation warps the crop and cuts the box again, so it needs pixels around
+//!   it), clamped to the frame, JPEG. The sample's "3D box" is the detector's box as a flat
+//!   rectangle (both faces): its hull is the box the network sees at inference.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+use vpcal_geom::aggregate::tracks::{link, TrackOptions};
+use vpcal_geom::camera::{orthogonal_vp_on_line, Calibration};
+use vpcal_geom::{BoxPx, Point2};
+use vpcal_synth::{RealMeta, SampleMeta, SampleRecord};
+
+use crate::aggregate::Aggregated;
+use crate::detector::is_stills;
+use crate::pipeline::{calibrate, open_input, run_pipeline, PipelineConfig, VehicleRecord};
+use crate::progress::Progress;
+
+/// Label direction uncertainty (degrees) at which a sample's loss weight is one half: about
+/// the per-vehicle direction error of the paper's BoxCars-trained networks on good detections
+/// (1-2.5°), so a label counts fully only when it is better than what the network can learn.
+pub const LABEL_SD0_DEG: f64 = 2.0;
+
+/// `format` of the `config.json` that `vpcal label` writes.
+pub const LABEL_FORMAT: &str = "vpcal-real-crops";
+
+/// What is labelled, and how strictly.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LabelSettings {
+    /// Straight tracks needed for VP1.
+    pub min_track_lines: usize,
+    /// The straight tracks must point at VP1 to this median angle, degrees.
+    pub max_track_residual_deg: f64,
+    /// Largest bootstrap spread of the horizon's angle, degrees.
+    pub max_horizon_sd_deg: f64,
+    /// Boxes a vehicle track needs.
+    pub min_track_boxes: usize,
+    /// A track whose line misses VP1 by more than this (degrees) is not driving along the road.
+    pub max_track_angle_deg: f64,
+    /// A track must travel this many times its median box height (parked cars, false boxes).
+    pub min_travel_heights: f64,
+    /// Smallest box height, pixels (smaller crops carry little).
+    pub min_box_height_px: f64,
+    /// Boxes within this many pixels of the frame border are cut off: not labelled.
+    pub border_px: f64,
+    /// At most this many crops per track, evenly spaced along it (neighbouring frames are
+    /// nearly the same picture).
+    pub max_per_track: usize,
+    /// Margin added on each side of the box, in box sizes.
+    pub margin: f64,
+    /// JPEG quality of the crops.
+    pub jpeg_quality: u8,
+}
+
+impl Default for LabelSettings {
+    fn default() -> LabelSettings {
+        LabelSettings {
+            min_track_lines: 5,
+            max_track_residual_deg: 1.0,
+            max_horizon_sd_deg: 2.0,
+            min_track_boxes: 5,
+            max_track_angle_deg: 2.0,
+            min_travel_heights: 1.0,
+            min_box_height_px: 24.0,
+            border_px: 2.0,
+            max_per_track: 12,
+            margin: 0.2,
+            jpeg_quality: 92,
+        }
+    }
+}
+
+/// One camera's labelling: what was obtained, how consistent its labels are, or why it was
+/// refused.
+#[derive(Debug, Clone, Serialize)]
+pub struct CameraReport {
+    pub camera: String,
+    pub source: String,
+    /// Why the footage was not labelled (`None` when it was).
+    pub refused: Option<String>,
+    pub frames: u64,
+    pub boxes: usize,
+    /// Tracks of at least `min_track_boxes` boxes, and of those the moving ones that head for
+    /// VP1 (the labelled vehicles).
+    pub tracks: usize,
+    pub vehicles: usize,
+    pub crops: usize,
+    /// The camera's own consistency.
+    pub track_lines: Option<u64>,
+    pub track_residual_deg: Option<f64>,
+    pub horizon_sd_deg: Option<f64>,
+    pub focal_px: Option<f64>,
+    pub focal_source: Option<String>,
+    pub focal_interval_px: Option<[f64; 2]>,
+    /// Medians over the crops of the label uncertainties and weights.
+    pub vp1_sd_deg: Option<f64>,
+    pub vp2_sd_deg: Option<f64>,
+    pub label_weight: Option<[f64; 2]>,
+}
+
+impl CameraReport {
+    fn new(camera: &str, source: &Path) -> CameraReport {
+        CameraReport {
+            camera: camera.to_string(),
+            source: source.display().to_string(),
+            refused: None,
+            frames: 0,
+            boxes: 0,
+            tracks: 0,
+            vehicles: 0,
+            crops: 0,
+            track_lines: None,
+            track_residual_deg: None,
+            horizon_sd_deg: None,
+            focal_px: None,
+            focal_source: None,
+            focal_interval_px: None,
+            vp1_sd_deg: None,
+            vp2_sd_deg: None,
+            label_weight: None,
+        }
+    }
+}
+
+/// The angle between the lines from `at` to `a` and from `at` to `b`, degrees in [0, 90]
+/// (a VP is a direction: lines, not rays).
+pub fn direction_error_deg(at: Point2, a: Point2, b: Point2) -> f64 {
+    let (u, v) = (a - at, b - at);
+    let ang = (u.x * v.y - u.y * v.x).atan2(u.dot(v)).abs().to_degrees();
+    ang.min(180.0 - ang)
+}
+
+/// Loss weight of a label whose direction is uncertain by `sd_deg`: `1 / (1 + (sd / sd0)²)`.
+pub fn label_weight(sd_deg: f64, sd0_deg: f64) -> f32 {
+    if !sd_deg.is_finite() {
+        return 0.0;
+    }
+    (1.0 / (1.0 + (sd_deg / sd0_deg).powi(2))) as f32
+}
+
+/// What the camera's estimate leaves uncertain, for the labels' directions.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraUncertainty {
+    /// Median angle of the straight tracks to VP1, degrees.
+    pub track_residual_deg: f64,
+    /// Bootstrap spread of the horizon's angle, degrees.
+    pub horizon_sd_deg: f64,
+    /// The focal length's 68 % interval, pixels.
+    pub focal_interval_px: [f64; 2],
+}
+
+/// Direction uncertainties (degrees) of the VP1 and VP2 labels at `at` (a box centre):
+/// VP1's is the tracks' residual; VP2's from how far its
+/// direction turns when the focal length moves to either end of its interval (VP2 slides
+/// along the horizon), and the horizon's roll spread. `None` when the camera gives no VP2
+/// for an end of the interval.
+pub fn label_uncertainty(
+    cal: &Calibration,
+    at: Point2,
+    u: &CameraUncertainty,
+) -> Option<(f64, f64)> {
+    let sd1 = u.track_residual_deg;
+    let mut turn: f64 = 0.0;
+    for f in u.focal_interval_px {
+        let vp2 = orthogonal_vp_on_line(cal.vp1, cal.horizon, f, cal.pp)?;
+        turn = turn.max(direction_error_deg(at, cal.vp2, vp2));
+    }
+    let sd2 = (turn.powi(2) + u.horizon_sd_deg.powi(2)).sqrt();
+    Some((sd1, sd2))
+}
+
+/// The crop around `b`: grown by `margin` box sizes on each side, integer pixels, clamped to
+/// a `width` x `height` frame. `(x0, y0, x1, y1)` with `x1 > x0`, `y1 > y0` for a box inside.
+pub fn crop_rect(b: &BoxPx, margin: f64, width: u32, height: u32) -> (u32, u32, u32, u32) {
+    let (mx, my) = (margin * b.width(), margin * b.height());
+    let clamp = |v: f64, hi: u32| v.clamp(0.0, f64::from(hi)) as u32;
+    (
+        clamp((b.x0 - mx).floor(), width),
+        clamp((b.y0 - my).floor(), height),
+        clamp((b.x1 + mx).ceil(), width),
+        clamp((b.y1 + my).ceil(), height),
+    )
+}
+
+/// The angle (degrees) between the principal axis of `centres` and the line from their mean
+/// to `vp1`; `None` for fewer than 2 distinct points.
+pub fn track_angle_to_vp_deg(centres: &[Point2], vp1: Point2) -> Option<f64> {
+    if centres.len() < 2 {
+        return None;
+    }
+    let n = centres.len() as f64;
+    let mean = centres.iter().fold(Point2::new(0.0, 0.0), |a, &c| a + c) / n;
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for c in centres {
+        let d = *c - mean;
+        sxx += d.x * d.x;
+        sxy += d.x * d.y;
+        syy += d.y * d.y;
+    }
+    if sxx + syy <= 0.0 {
+        return None;
+    }
+    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let dir = Point2::new(theta.cos(), theta.sin());
+    Some(direction_error_deg(mean, mean + dir, vp1))
+}
+
+/// `k` indices evenly spread over `0..n` (all of them when `n <= k`).
+pub fn spread_evenly(n: usize, k: usize) -> Vec<usize> {
+    if n <= k {
+        return (0..n).collect();
+    }
+    if k == 0 {
+        return Vec::new();
+    }
+    if k == 1 {
+        return vec![n / 2];
+    }
+    (0..k).map(|i| i * (n - 1) / (k - 1)).collect()
+}
+
+/// A stable id base for a camera's vehicles (FNV-1a of its name), so that crops of several
+/// cameras written into one folder, or folders joined for training, keep distinct vehicles.
+pub fn vehicle_base(camera: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in camera.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    (h % 1_000_000_000) * 1_000_000
+}
+
+/// A crop still to be cut: which record, which track, which instance.
+struct Wanted {
+    record: usize,
+    track: usize,
+    instance: u32,
+    sd: (f64, f64),
+}
+
+fn evidence_f64(agg: &Aggregated, key: &str) -> Option<f64> {
+    agg.evidence.get(key).and_then(serde_json::Value::as_f64)
+}
+
+fn evidence_bool(agg: &Aggregated, key: &str) -> bool {
+    agg.evidence
+        .get(key)
+        .and_then(serde_json::Value::as_bool)
+        .unwrap_or(false)
+}
+
+/// The first gate the camera fails, as a sentence; `None` when it may be labelled.
+fn refusal(agg: &Aggregated, settings: &LabelSettings) -> Option<String> {
+    if evidence_bool(agg, "road_curved") {
+        return Some("the road curves: vehicles do not share one VP1".into());
+    }
+    if !evidence_bool(agg, "vp1_from_tracks") {
+        return Some(
+            "VP1 does not come from straight vehicle tracks (too few tracks, or they disagree)"
+                .into(),
+        );
+    }
+    let lines = agg
+        .evidence
+        .get("track_lines")
+        .and_then(serde_json::Value::as_u64)
+        .unwrap_or(0);
+    if (lines as usize) < settings.min_track_lines {
+        return Some(format!(
+            "{lines} straight tracks, {} needed",
+            settings.min_track_lines
+        ));
+    }
+    match evidence_f64(agg, "track_residual_deg") {
+        Some(r) if r <= settings.max_track_residual_deg => {}
+        Some(r) => {
+            return Some(format!(
+                "the straight tracks point at VP1 to {r:.2}° (median), more than {:.2}°",
+                settings.max_track_residual_deg
+            ))
+        }
+        None => return Some("no track residual".into()),
+    }
+    match agg.confidence.as_ref().map(|c| c.horizon_angle_sd_deg) {
+        Some(sd) if sd.is_finite() && sd <= settings.max_horizon_sd_deg => None,
+        Some(sd) => Some(format!(
+            "the horizon's angle spreads by {sd:.2}°, more than {:.2}°",
+            settings.max_horizon_sd_deg
+        )),
+        None => Some("no bootstrap spread of the horizon (run with --bootstrap > 0)".into()),
+    }
+}
+
+/// Label the footage at `input` as camera `camera`: crops go to `out_dir/images/<camera>/`,
+/// their records are returned (the caller writes the index, [`vpcal_synth::write_index`]).
+/// A camera that cannot be labelled confidently gives a report with `refused` and no records.
+///
+/// # Errors
+/// An unreadable input, a failing detector or network, an unwritable folder.
+pub fn label_footage(
+    input: &Path,
+    camera: &str,
+    config: &PipelineConfig,
+    settings: &LabelSettings,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<(CameraReport, Vec<SampleRecord>)> {
+    let mut report = CameraReport::new(camera, input);
+    let out = run_pipeline(input, config, progress)?;
+    report.frames = out.stats.frames;
+    report.boxes = out.records.len();
+    if is_stills(&out.info) {
+        report.refused =
+            Some("stills, not consecutive frames: no tracks (give a folder --fps)".into());
+        return Ok((report, Vec::new()));
+    }
+    let (cal, agg) = match calibrate(&out, config) {
+        Ok(c) => c,
+        Err(e) => {
+            report.refused = Some(format!("{e:#}"));
+            return Ok((report, Vec::new()));
+        }
+    };
+    report.track_lines = agg
+        .evidence
+        .get("track_lines")
+        .and_then(serde_json::Value::as_u64);
+    report.track_residual_deg = evidence_f64(&agg, "track_residual_deg");
+    report.horizon_sd_deg = agg.confidence.as_ref().map(|c| c.horizon_angle_sd_deg);
+    report.focal_px = Some(cal.focal_px);
+    report.focal_source = Some(agg.focal_source.name().to_string());
+    report.focal_interval_px = agg.focal_interval_px;
+    if let Some(why) = refusal(&agg, settings) {
+        report.refused = Some(why);
+        return Ok((report, Vec::new()));
+    }
+    let uncertainty = CameraUncertainty {
+        track_residual_deg: report.track_residual_deg.unwrap_or(0.0),
+        horizon_sd_deg: report.horizon_sd_deg.unwrap_or(0.0),
+        focal_interval_px: agg
+            .focal_interval_px
+            .unwrap_or([cal.focal_px, cal.focal_px]),
+    };
+    let wanted = choose_boxes(&out.records, &cal, &uncertainty, settings, &mut report, {
+        let (w, h) = (out.info.width, out.info.height);
+        move |b: &BoxPx| {
+            b.x0 > settings.border_px
+                && b.y0 > settings.border_px
+                && b.x1 < f64::from(w) - settings.border_px
+                && b.y1 < f64::from(h) - settings.border_px
+        }
+    });
+    if wanted.is_empty() {
+        report.refused = Some("no moving vehicle heads for VP1 on a long enough track".into());
+        return Ok((report, Vec::new()));
+    }
+    let records = cut_crops(input, camera, config, settings, out_dir, &out.records, &cal, &agg, &wanted)?;
+    report.crops = records.len();
+    let med = |f: &dyn Fn(&Wanted) -> f64| {
+        let v: Vec<f64> = wanted.iter().map(f).collect();
+        vpcal_geom::solve::median(&v)
+    };
+    report.vp1_sd_deg = med(&|w| w.sd.0);
+    report.vp2_sd_deg = med(&|w| w.sd.1);
+    report.label_weight = match (
+        med(&|w| f64::from(label_weight(w.sd.0, LABEL_SD0_DEG))),
+        med(&|w| f64::from(label_weight(w.sd.1, LABEL_SD0_DEG))),
+    ) {
+        (Some(a), Some(b)) => Some([a, b]),
+        _ => None,
+    };
+    Ok((report, records))
+}
+
+/// The boxes to label: on tracks of moving vehicles that head for VP1, inside the frame,
+/// large enough, at most `max_per_track` a track.
+fn choose_boxes(
+    records: &[VehicleRecord],
+    cal: &Calibration,
+    u: &CameraUncertainty,
+    settings: &LabelSettings,
+    report: &mut CameraReport,
+    inside: impl Fn(&BoxPx) -> bool,
+) -> Vec<Wanted> {
+    let boxes: Vec<(f64, BoxPx)> = records.iter().map(|r| (r.frame as f64, r.det_box)).collect();
+    let options = TrackOptions {
+        max_gap_steps: 8.0,
+        ..TrackOptions::default()
+    };
+    let mut wanted = Vec::new();
+    for (t, track) in link(&boxes, &options).iter().enumerate() {
+        if track.len() < settings.min_track_boxes {
+            continue;
+        }
+        report.tracks += 1;
+        let centres: Vec<Point2> = track.iter().map(|&i| records[i].det_box.center()).collect();
+        let heights: Vec<f64> = track.iter().map(|&i| records[i].det_box.height()).collect();
+        let height = vpcal_geom::solve::median(&heights).unwrap_or(0.0);
+        let travel = centres
+            .first()
+            .zip(centres.last())
+            .map_or(0.0, |(a, b)| (*b - *a).norm());
+        if travel < settings.min_travel_heights * height {
+            continue;
+        }
+        match track_angle_to_vp_deg(&centres, cal.vp1) {
+            Some(a) if a <= settings.max_track_angle_deg => {}
+            _ => continue,
+        }
+        let usable: Vec<usize> = track
+            .iter()
+            .copied()
+            .filter(|&i| {
+                let b = &records[i].det_box;
+                b.height() >= settings.min_box_height_px && inside(b)
+            })
+            .collect();
+        let picked = spread_evenly(usable.len(), settings.max_per_track);
+        if picked.is_empty() {
+            continue;
+        }
+        report.vehicles += 1;
+        for (k, p) in picked.into_iter().enumerate() {
+            let record = usable[p];
+            let Some(sd) = label_uncertainty(cal, records[record].det_box.center(), u) else {
+                continue;
+            };
+            wanted.push(Wanted {
+                record,
+                track: t,
+                instance: k as u32,
+                sd,
+            });
+        }
+    }
+    wanted
+}
+
+/// Read the footage again and cut, encode and write the wanted crops; their records.
+#[allow(clippy::too_many_arguments)]
+// # Why: the pass needs the run's input, settings and results together; they are not a type
+// of their own anywhere else.
+fn cut_crops(
+    input: &Path,
+    camera: &str,
+    config: &PipelineConfig,
+    settings: &LabelSettings,
+    out_dir: &Path,
+    records: &[VehicleRecord],
+    cal: &Calibration,
+    agg: &Aggregated,
+    wanted: &[Wanted],
+) -> Result<Vec<SampleRecord>> {
+    let mut by_frame: BTreeMap<u64, Vec<&Wanted>> = BTreeMap::new();
+    for w in wanted {
+        by_frame.entry(records[w.record].frame).or_default().push(w);
+    }
+    let last = by_frame.keys().next_back().copied().unwrap_or(0);
+    let rel_dir = PathBuf::from("images").join(camera);
+    let dir = out_dir.join(&rel_dir);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let base = vehicle_base(camera);
+    let mut out = Vec::with_capacity(wanted.len());
+    let mut source = open_input(input, &config.frames)
+        .with_context(|| format!("opening {} again to cut the crops", input.display()))?;
+    for frame in source.by_ref() {
+        let frame = frame.with_context(|| format!("reading {} again", input.display()))?;
+        if frame.index > last {
+            break;
+        }
+        let Some(list) = by_frame.get(&frame.index) else {
+            continue;
+        };
+        let (fw, fh) = frame.image.dimensions();
+        for w in list {
+            let r = &records[w.record];
+            let (x0, y0, x1, y1) = crop_rect(&r.det_box, settings.margin, fw, fh);
+            if x1 <= x0 || y1 <= y0 {
+                continue;
+            }
+            let crop = image::imageops::crop_imm(&frame.image, x0, y0, x1 - x0, y1 - y0).to_image();
+            let jpeg = vpcal_synth::post::encode_jpeg(&crop, settings.jpeg_quality)
+                .with_context(|| format!("encoding a crop of frame {}", frame.index))?;
+            let vehicle = base + w.track as u64;
+            let name = format!("{vehicle}_{}.jpg", w.instance);
+            let path = dir.join(&name);
+            vpcal_formats::fs::write_atomic(&path, &jpeg)?;
+            let origin = Point2::new(f64::from(x0), f64::from(y0));
+            let rel = |p: Point2| (p - origin).as_array();
+            let b = &r.det_box;
+            let rect = [
+                rel(Point2::new(b.x0, b.y1)),
+                rel(Point2::new(b.x1, b.y1)),
+                rel(Point2::new(b.x1, b.y0)),
+                rel(Point2::new(b.x0, b.y0)),
+            ];
+            let weights = [
+                label_weight(w.sd.0, LABEL_SD0_DEG),
+                label_weight(w.sd.1, LABEL_SD0_DEG),
+            ];
+            let box_rel = [rect[0][0], rect[2][1], rect[1][0], rect[0][1]];
+            out.push(SampleRecord {
+                vehicle,
+                instance: w.instance,
+                image: rel_dir.join(&name).to_string_lossy().replace('\\', "/"),
+                width: x1 - x0,
+                height: y1 - y0,
+                bb3d: [
+                    rect[0], rect[1], rect[2], rect[3], rect[0], rect[1], rect[2], rect[3],
+                ],
+                vp1: rel(cal.vp1),
+                vp2: rel(cal.vp2),
+                box2d: box_rel,
+                label_weight: weights,
+                meta: SampleMeta::Real(RealMeta {
+                    source: input.display().to_string(),
+                    camera: camera.to_string(),
+                    frame: frame.index,
+                    track: w.track as u64,
+                    score: r.score,
+                    det_box: [b.x0, b.y0, b.x1, b.y1],
+                    crop_origin: origin.as_array(),
+                    frame_size: [fw, fh],
+                    focal_px: cal.focal_px,
+                    focal_source: agg.focal_source.name().to_string(),
+                    pp: cal.pp.as_array(),
+                    vp1_sd_deg: w.sd.0,
+                    vp2_sd_deg: w.sd.1,
+                }),
+            });
+        }
+    }
+    if out.len() < wanted.len() {
+        bail!(
+            "{}: the second pass found {} of the {} crops (the footage ended early?)",
+            input.display(),
+            out.len(),
+            wanted.len()
+        );
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn direction_error_is_the_angle_between_lines() {
+        let at = Point2::new(0.0, 0.0);
+        let e = direction_error_deg(at, Point2::new(10.0, 0.0), Point2::new(-10.0, 1e-12));
+        assert!(e < 1e-9, "{e}");
+        let e = direction_error_deg(at, Point2::new(1.0, 0.0), Point2::new(1.0, 1.0));
+        assert!((e - 45.0).abs() < 1e-9, "{e}");
+        let e = direction_error_deg(at, Point2::new(1.0, 0.0), Point2::new(0.0, -5.0));
+        assert!((e - 90.0).abs() < 1e-9, "{e}");
+    }
+
+    #[test]
+    fn label_weight_is_half_at_sd0_and_falls() {
+        assert!((label_weight(0.0, 2.0) - 1.0).abs() < 1e-6);
+        assert!((label_weight(2.0, 2.0) - 0.5).abs() < 1e-6);
+        assert!(label_weight(6.0, 2.0) < 0.11);
+        assert_eq!(label_weight(f64::NAN, 2.0), 0.0);
+    }
+
+    #[test]
+    fn crop_rect_grows_and_clamps() {
+        let b = BoxPx::new(10.0, 20.0, 30.0, 60.0);
+        assert_eq!(crop_rect(&b, 0.25, 100, 100), (5, 10, 35, 70));
+        assert_eq!(crop_rect(&b, 1.0, 40, 70), (0, 0, 40, 70));
+    }
+
+    #[test]
+    fn spread_evenly_keeps_the_ends() {
+        assert_eq!(spread_evenly(3, 5), vec![0, 1, 2]);
+        assert_eq!(spread_evenly(10, 3), vec![0, 4, 9]);
+        assert_eq!(spread_evenly(10, 1), vec![5]);
+        assert!(spread_evenly(10, 0).is_empty());
+    }
+
+    #[test]
+    fn a_track_towards_vp1_has_a_small_angle() {
+        let vp1 = Point2::new(500.0, -1000.0);
+        let centres: Vec<Point2> = (0..10)
+            .map(|i| {
+                let t = f64::from(i) / 10.0;
+                Point2::new(100.0, 800.0) * (1.0 - t * 0.3) + vp1 * (t * 0.3)
+            })
+            .collect();
+        let a = track_angle_to_vp_deg(&centres, vp1).unwrap();
+        assert!(a < 1e-6, "{a}");
+        let sideways: Vec<Point2> = (0..10)
+            .map(|i| Point2::new(f64::from(i) * 10.0, 800.0))
+            .collect();
+        assert!(track_angle_to_vp_deg(&sideways, vp1).unwrap() > 30.0);
+        assert!(track_angle_to_vp_deg(&centres[..1], vp1).is_none());
+    }
+
+    #[test]
+    fn label_uncertainty_of_vp2_grows_with_the_focal_interval_and_is_small_for_far_vp2() {
+        // A camera looking down the road: VP1 above the centre, VP2 far to the right.
+        let pp = Point2::new(960.0, 540.0);
+        let f = 2000.0;
+        let vp1 = Point2::new(960.0, 540.0 - 800.0);
+        let horizon = vpcal_geom::Line::from_slope_intercept(0.0, vp1.y);
+        let vp2 = orthogonal_vp_on_line(vp1, horizon, f, pp).unwrap();
+        let cal = Calibration::from_vps(vp1, vp2, pp).unwrap();
+        let at = Point2::new(700.0, 900.0);
+        let mut u = CameraUncertainty {
+            track_residual_deg: 0.3,
+            horizon_sd_deg: 0.0,
+            focal_interval_px: [f, f],
+        };
+        let (sd1, sd2) = label_uncertainty(&cal, at, &u).unwrap();
+        assert!((sd1 - 0.3).abs() < 1e-9, "{sd1}");
+        assert!(sd2 < 1e-9, "{sd2}");
+        u.focal_interval_px = [0.7 * f, 1.4 * f];
+        let (_, wide) = label_uncertainty(&cal, at, &u).unwrap();
+        u.focal_interval_px = [0.95 * f, 1.05 * f];
+        let (_, narrow) = label_uncertainty(&cal, at, &u).unwrap();
+        assert!(wide > narrow && narrow > 0.0, "{wide} {narrow}");
+        // The roll spread adds in quadrature.
+        u.horizon_sd_deg = 1.0;
+        let (_, with_roll) = label_uncertainty(&cal, at, &u).unwrap();
+        assert!((with_roll - (narrow * narrow + 1.0).sqrt()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn vehicle_bases_differ_by_camera_and_leave_room_for_tracks() {
+        let (a, b) = (vehicle_base("cam_a"), vehicle_base("cam_b"));
+        assert_ne!(a, b);
+        assert_eq!(a % 1_000_000, 0);
+    }
+}
