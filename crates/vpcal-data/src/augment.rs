@@ -46,8 +46,8 @@ pub struct AugmentConfig {
     pub min_crop_px: f64,
     /// Random draws before falling back to the un-warped crop.
     pub max_tries: u32,
-    /// Probability of each sensor effect (exposure and colour, blur, low resolution, noise,
-    /// JPEG; [`crate::sensor`]); 0 (the paper) applies none.
+    /// Probability of each sensor effect (a partial occluder, exposure and colour, blur, low
+    /// resolution, noise, JPEG; [`crate::sensor`]); 0 (the paper) applies none.
     #[serde(default)]
     pub sensor_probability: f64,
 }

@@ -21,8 +21,8 @@ pub mod augment;
 pub mod boxcars;
 pub mod pipeline;
 pub mod preview;
-pub mod sensor;
 mod sample;
+pub mod sensor;
 mod source;
 pub mod warp;
 

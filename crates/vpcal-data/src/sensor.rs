@@ -2,14 +2,16 @@
 //! renderer does not (sim-to-real for synthetic crops; also varies real crops).
 //!
 //! Each effect is applied independently with the same probability `p`, in the order a camera
-//! would: exposure and colour (gain, offset, white balance, saturation), optics (Gaussian
+//! would: a partial occluder in the scene (a flat-ish patch entering from one side of the crop,
+//! as a pole, a sign or a neighbouring vehicle does), exposure and colour (gain, offset, white balance, saturation), optics (Gaussian
 //! blur), resolution (down-sampling then up-sampling back), sensor noise (Gaussian), and
 //! compression (JPEG at a low quality). Geometry is untouched: the VPs stay exact.
 //!
 //! The ranges cover what the real corpus shows (`../shared/data/traffic_corpus`: 320x240
 //! webcams with heavy compression, hazy motorway webcams, night scenes, telephoto blur):
 //! gain 0.55-1.45, offset ±30, per-channel gain ±12 %, saturation 0.3-1.2, blur σ 0.3-1.6 px,
-//! down-sampling by 1.5-3.5, noise σ 2-10 (8-bit levels), JPEG quality 15-70.
+//! down-sampling by 1.5-3.5, noise σ 2-10 (8-bit levels), JPEG quality 15-70; occluders cover
+//! 8-30 % of the crop's width or height.
 
 use image::{ImageBuffer, Rgb, RgbImage};
 use rand::Rng;
@@ -21,6 +23,9 @@ pub fn sensor_effects<R: Rng + ?Sized>(image: RgbImage, p: f64, rng: &mut R) -> 
         return image;
     }
     let mut img = image;
+    if rng.random::<f64>() < p {
+        occlude(&mut img, rng);
+    }
     if rng.random::<f64>() < p {
         img = exposure(&img, rng);
     }
@@ -65,11 +70,50 @@ fn exposure<R: Rng + ?Sized>(img: &RgbImage, rng: &mut R) -> RgbImage {
     })
 }
 
+/// Cover a band along one side of the image (8-30 % of its extent) with a textured flat colour.
+fn occlude<R: Rng + ?Sized>(img: &mut RgbImage, rng: &mut R) {
+    let (w, h) = img.dimensions();
+    let side = rng.random_range(0..4u8);
+    let frac = rng.random_range(0.08..0.30);
+    let along = rng.random_range(0.3..1.0);
+    let (bw, bh) = if side < 2 {
+        (
+            (f64::from(w) * frac).ceil() as u32,
+            (f64::from(h) * along).ceil() as u32,
+        )
+    } else {
+        (
+            (f64::from(w) * along).ceil() as u32,
+            (f64::from(h) * frac).ceil() as u32,
+        )
+    };
+    let (bw, bh) = (bw.clamp(1, w), bh.clamp(1, h));
+    let (x0, y0) = match side {
+        0 => (0, rng.random_range(0..=h - bh)),
+        1 => (w - bw, rng.random_range(0..=h - bh)),
+        2 => (rng.random_range(0..=w - bw), 0),
+        _ => (rng.random_range(0..=w - bw), h - bh),
+    };
+    let base: [f64; 3] = [
+        rng.random_range(0.0..255.0),
+        rng.random_range(0.0..255.0),
+        rng.random_range(0.0..255.0),
+    ];
+    for y in y0..y0 + bh {
+        for x in x0..x0 + bw {
+            let t = rng.random_range(-12.0..12.0);
+            let px = base.map(|c| (c + t).round().clamp(0.0, 255.0) as u8);
+            img.put_pixel(x, y, Rgb(px));
+        }
+    }
+}
+
 fn low_resolution(img: &RgbImage, factor: f64) -> RgbImage {
     let (w, h) = img.dimensions();
     let small_w = ((f64::from(w) / factor).round() as u32).max(2);
     let small_h = ((f64::from(h) / factor).round() as u32).max(2);
-    let small = image::imageops::resize(img, small_w, small_h, image::imageops::FilterType::Triangle);
+    let small =
+        image::imageops::resize(img, small_w, small_h, image::imageops::FilterType::Triangle);
     image::imageops::resize(&small, w, h, image::imageops::FilterType::Triangle)
 }
 
@@ -118,6 +162,27 @@ mod tests {
             let out = sensor_effects(img.clone(), 1.0, &mut rng);
             assert_eq!(out.dimensions(), img.dimensions());
             assert_ne!(out, img, "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn an_occluder_covers_one_side_and_leaves_the_rest() {
+        for seed in 0..16 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let img = gradient();
+            let mut out = img.clone();
+            occlude(&mut out, &mut rng);
+            let changed: Vec<(u32, u32)> = out
+                .enumerate_pixels()
+                .filter(|(x, y, p)| *p != img.get_pixel(*x, *y))
+                .map(|(x, y, _)| (x, y))
+                .collect();
+            let n = changed.len() as f64 / (64.0 * 64.0);
+            assert!(n > 0.0 && n <= 0.31, "seed {seed}: {n}");
+            // The band touches a border of the crop.
+            assert!(changed
+                .iter()
+                .any(|&(x, y)| x == 0 || y == 0 || x == 63 || y == 63));
         }
     }
 

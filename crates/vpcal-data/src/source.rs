@@ -99,7 +99,9 @@ impl ConcatSource {
     /// [`DataError::Config`] when no part is given or the parts' splits differ.
     pub fn new(parts: Vec<Arc<dyn SampleSource>>) -> Result<ConcatSource, DataError> {
         let Some(first) = parts.first() else {
-            return Err(DataError::Config("a concatenation needs at least one source".into()));
+            return Err(DataError::Config(
+                "a concatenation needs at least one source".into(),
+            ));
         };
         let split = first.split();
         if let Some(p) = parts.iter().find(|p| p.split() != split) {

@@ -12,7 +12,7 @@ use vpcal_data::boxcars::BoxCars;
 use vpcal_data::pipeline::{sample_rng, Pipeline, PipelineConfig};
 use vpcal_data::warp::Resample;
 use vpcal_data::{
-    DataError, Sample, SampleId, SampleSource, Split, BB3D_EDGES_VP1, BB3D_EDGES_VP2,
+    ConcatSource, DataError, Sample, SampleId, SampleSource, Split, BB3D_EDGES_VP1, BB3D_EDGES_VP2,
 };
 use vpcal_formats::pickle::{self, ArrayData, LoadOptions, Value};
 use vpcal_geom::heatmap::HeatmapCodec;
@@ -356,6 +356,74 @@ fn batches_are_deterministic_for_a_seed_whatever_the_workers() {
     let d = run(2, 42, 1);
     assert_ne!(a[0].ids, c[0].ids);
     assert_ne!(a[0].ids, d[0].ids);
+}
+
+#[test]
+fn joined_sources_read_as_one_and_label_weights_reach_the_batch() {
+    let bc = open();
+    let boxcars: Arc<dyn SampleSource> = Arc::new(bc.split(Split::Train));
+    let n = boxcars.len();
+    // A self-labelled sample: VP1 trusted, VP2 half.
+    let mut real = boxcars.get(0).unwrap();
+    real.id = SampleId {
+        vehicle: 7_000_002,
+        instance: 0,
+    };
+    real.label_weight = [1.0, 0.5];
+    let mem: Arc<dyn SampleSource> = Arc::new(MemSource(vec![real]));
+    let joined = ConcatSource::new(vec![Arc::clone(&boxcars), mem]).unwrap();
+    assert_eq!(joined.len(), n + 1);
+    assert_eq!(joined.get(n).unwrap().id.vehicle, 7_000_002);
+    assert_eq!(joined.get(1).unwrap().id, boxcars.get(1).unwrap().id);
+    assert!(joined.get(n + 1).is_err());
+    let val: Arc<dyn SampleSource> = Arc::new(bc.split(Split::Validation));
+    let e = ConcatSource::new(vec![Arc::clone(&boxcars), val]).unwrap_err();
+    assert!(e.to_string().contains("Validation"), "{e}");
+    assert!(ConcatSource::new(Vec::new()).is_err());
+
+    let cfg = PipelineConfig {
+        workers: 1,
+        warn_on_skip: false,
+        ..PipelineConfig::training(n + 1, 5)
+    };
+    let p = Pipeline::new(Arc::new(joined), cfg).unwrap();
+    let batch = p.epoch(0).next().unwrap().unwrap();
+    assert_eq!(batch.weights.len(), batch.size * batch.channels);
+    assert!(batch.is_weighted());
+    for (k, id) in batch.ids.iter().enumerate() {
+        let w = &batch.weights[k * batch.channels..(k + 1) * batch.channels];
+        let expect: Vec<f32> = if id.vehicle == 7_000_002 {
+            vec![1.0, 1.0, 1.0, 1.0, 0.5, 0.5, 0.5, 0.5]
+        } else {
+            vec![1.0; 8]
+        };
+        assert_eq!(w, &expect[..], "{id:?}");
+    }
+}
+
+#[test]
+fn sensor_effects_change_pixels_not_geometry() {
+    let bc = open();
+    let sample = bc.split(Split::Train).get(0).unwrap();
+    let plain = AugmentConfig::paper();
+    let real = AugmentConfig::real();
+    assert!(AugmentConfig::PRESETS.contains(&"real"));
+    let mut changed = 0;
+    for seed in 0..6u64 {
+        let a = augment(&sample, &plain, &mut sample_rng(seed, 0, 0)).unwrap();
+        let b = augment(&sample, &real, &mut sample_rng(seed, 0, 0)).unwrap();
+        // The geometry is drawn first, from the same stream: the same crop and VPs.
+        assert_eq!(a.crop, b.crop);
+        assert_eq!(a.vp1_box, b.vp1_box);
+        assert_eq!(a.vp2_box, b.vp2_box);
+        changed += usize::from(a.image != b.image);
+    }
+    assert!(changed >= 4, "sensor effects changed {changed} of 6 crops");
+    let bad = AugmentConfig {
+        sensor_probability: 1.5,
+        ..AugmentConfig::paper()
+    };
+    assert!(bad.validate().unwrap_err().contains("sensor_probability"));
 }
 
 /// A copy of the fixture in a temporary directory.

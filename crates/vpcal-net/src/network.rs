@@ -257,3 +257,66 @@ impl VpNetwork for StackedHourglass {
         Ok(terms)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn tensor(values: Vec<f32>, shape: [usize; 4]) -> Tensor<4> {
+        Tensor::from_data(TensorData::new(values, shape), &Device::flex())
+    }
+
+    fn batch_with(weights: Vec<f32>) -> Batch {
+        Batch {
+            size: 2,
+            input_size: 1,
+            images: vec![0.0; 6],
+            channels: 2,
+            heatmap_res: 2,
+            targets: vec![0.0; 16],
+            vp1_box: vec![[0.0, 0.0]; 2],
+            vp2_box: vec![[0.0, 0.0]; 2],
+            ids: Vec::new(),
+            weights,
+        }
+    }
+
+    #[test]
+    fn label_weights_scale_each_heatmap_and_exact_labels_change_nothing() {
+        // Two samples, two heatmaps (VP1, VP2) of 2x2: errors 1 everywhere in sample 0, 2 in
+        // sample 1.
+        let out: Vec<f32> = [vec![1.0; 8], vec![2.0; 8]].concat();
+        let shape = [2, 2, 2, 2];
+        let targets = tensor(vec![0.0; 16], shape);
+        let loss = |b: &Batch| {
+            let labels = label_weights_tensor(b, &Device::flex());
+            let l = heatmap_losses(
+                vec![tensor(out.clone(), shape)],
+                targets.clone(),
+                0.0,
+                labels,
+            );
+            to_vec(l).unwrap()[0]
+        };
+        let exact = batch_with(vec![1.0; 4]);
+        assert!(label_weights_tensor(&exact, &Device::flex()).is_none());
+        assert!((loss(&exact) - (8.0 * 1.0 + 8.0 * 4.0) / 16.0).abs() < 1e-6);
+        // Sample 1 does not count at all; sample 0's VP2 counts half.
+        let weighted = batch_with(vec![1.0, 0.5, 0.0, 0.0]);
+        assert!((loss(&weighted) - (4.0 + 4.0 * 0.5) / 16.0).abs() < 1e-6);
+        // With the foreground weight too, both multiply.
+        let t: Vec<f32> = (0..16)
+            .map(|i| if i % 4 == 0 { 1.0 } else { 0.0 })
+            .collect();
+        let targets = tensor(t.clone(), shape);
+        let labels = label_weights_tensor(&weighted, &Device::flex());
+        let l = heatmap_losses(vec![tensor(out.clone(), shape)], targets, 9.0, labels);
+        let mut expect = 0.0;
+        for (i, tv) in t.iter().enumerate() {
+            let w = [1.0, 0.5, 0.0, 0.0][i / 4] * (1.0 + 9.0 * tv);
+            expect += w * (out[i] - tv).powi(2);
+        }
+        assert!((to_vec(l).unwrap()[0] - expect / 16.0).abs() < 1e-5);
+    }
+}

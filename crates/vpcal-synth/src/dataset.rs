@@ -95,7 +95,8 @@ pub fn write_index(
         path,
         message: e.to_string(),
     };
-    let cfg = serde_json::to_vec_pretty(config).map_err(|e| format_err(dir.join("config.json"), e))?;
+    let cfg =
+        serde_json::to_vec_pretty(config).map_err(|e| format_err(dir.join("config.json"), e))?;
     write_atomic(&dir.join("config.json"), &cfg)?;
     let mut lines = String::new();
     for r in records {
@@ -323,5 +324,76 @@ impl vpcal_data::SampleSource for CropDirSource {
             vp2: rec.vp2,
             label_weight: rec.label_weight,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use vpcal_data::SampleSource;
+
+    fn real_record(vehicle: u64, weight: [f32; 2]) -> SampleRecord {
+        let rect = [[2.0, 10.0], [14.0, 10.0], [14.0, 2.0], [2.0, 2.0]];
+        SampleRecord {
+            vehicle,
+            instance: 0,
+            image: "images/cam/a.jpg".into(),
+            width: 16,
+            height: 12,
+            bb3d: [
+                rect[0], rect[1], rect[2], rect[3], rect[0], rect[1], rect[2], rect[3],
+            ],
+            vp1: [8.0, -300.0],
+            vp2: [4000.0, -290.0],
+            box2d: [2.0, 2.0, 14.0, 10.0],
+            label_weight: weight,
+            meta: SampleMeta::Real(RealMeta {
+                source: "clip.mp4".into(),
+                camera: "cam".into(),
+                frame: 12,
+                track: 3,
+                score: 0.8,
+                det_box: [102.0, 52.0, 114.0, 60.0],
+                crop_origin: [100.0, 50.0],
+                frame_size: [320, 240],
+                focal_px: 400.0,
+                focal_source: "prior".into(),
+                pp: [160.0, 120.0],
+                vp1_sd_deg: 0.3,
+                vp2_sd_deg: 2.0,
+            }),
+        }
+    }
+
+    #[test]
+    fn real_crops_round_trip_with_their_label_weights() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("images/cam")).unwrap();
+        let img = image::RgbImage::from_pixel(16, 12, image::Rgb([90, 100, 110]));
+        let jpeg = crate::post::encode_jpeg(&img, 90).unwrap();
+        std::fs::write(dir.path().join("images/cam/a.jpg"), jpeg).unwrap();
+        let rec = real_record(12, [1.0, 0.5]);
+        let cfg = serde_json::json!({"format": "vpcal-real-crops", "version": 1});
+        write_index(dir.path(), &cfg, std::slice::from_ref(&rec)).unwrap();
+        let text = std::fs::read_to_string(dir.path().join("samples.jsonl")).unwrap();
+        assert!(text.contains("\"label_weight\":[1.0,0.5]"), "{text}");
+        let src = CropDirSource::open(dir.path(), Split::Train).unwrap();
+        assert_eq!(src.len(), 1);
+        assert!(matches!(src.records()[0].meta, SampleMeta::Real(ref m) if m.camera == "cam"));
+        let s = src.get(0).unwrap();
+        assert_eq!(s.label_weight, [1.0, 0.5]);
+        assert_eq!(s.vp2, [4000.0, -290.0]);
+        // Exact labels are not written, and a line without them reads as exact.
+        let exact = real_record(12, vpcal_data::EXACT_LABELS);
+        write_index(dir.path(), &cfg, &[exact]).unwrap();
+        let text = std::fs::read_to_string(dir.path().join("samples.jsonl")).unwrap();
+        assert!(!text.contains("label_weight"), "{text}");
+        let src = CropDirSource::open(dir.path(), Split::Train).unwrap();
+        assert_eq!(src.get(0).unwrap().label_weight, vpcal_data::EXACT_LABELS);
+        // A weight outside [0, 1] is refused with the line number.
+        write_index(dir.path(), &cfg, &[real_record(12, [1.0, 1.5])]).unwrap();
+        let e = CropDirSource::open(dir.path(), Split::Train).unwrap_err();
+        assert!(e.to_string().contains("line 1: label_weight"), "{e}");
     }
 }

@@ -386,7 +386,17 @@ pub fn label_footage(
         report.refused = Some("no moving vehicle heads for VP1 on a long enough track".into());
         return Ok((report, Vec::new()));
     }
-    let records = cut_crops(input, camera, config, settings, out_dir, &out.records, &cal, &agg, &wanted)?;
+    let records = cut_crops(
+        input,
+        camera,
+        config,
+        settings,
+        out_dir,
+        &out.records,
+        &cal,
+        &agg,
+        &wanted,
+    )?;
     report.crops = records.len();
     let med = |f: &dyn Fn(&Wanted) -> f64| {
         let v: Vec<f64> = wanted.iter().map(f).collect();
@@ -414,7 +424,10 @@ fn choose_boxes(
     report: &mut CameraReport,
     inside: impl Fn(&BoxPx) -> bool,
 ) -> Vec<Wanted> {
-    let boxes: Vec<(f64, BoxPx)> = records.iter().map(|r| (r.frame as f64, r.det_box)).collect();
+    let boxes: Vec<(f64, BoxPx)> = records
+        .iter()
+        .map(|r| (r.frame as f64, r.det_box))
+        .collect();
     let options = TrackOptions {
         max_gap_steps: 8.0,
         ..TrackOptions::default()
@@ -631,10 +644,10 @@ mod tests {
 
     #[test]
     fn label_uncertainty_of_vp2_grows_with_the_focal_interval_and_is_small_for_far_vp2() {
-        // A camera looking down the road: VP1 above the centre, VP2 far to the right.
+        // A camera looking down the road: VP1 above and right of the centre, VP2 far left.
         let pp = Point2::new(960.0, 540.0);
         let f = 2000.0;
-        let vp1 = Point2::new(960.0, 540.0 - 800.0);
+        let vp1 = Point2::new(960.0 + 200.0, 540.0 - 800.0);
         let horizon = vpcal_geom::Line::from_slope_intercept(0.0, vp1.y);
         let vp2 = orthogonal_vp_on_line(vp1, horizon, f, pp).unwrap();
         let cal = Calibration::from_vps(vp1, vp2, pp).unwrap();

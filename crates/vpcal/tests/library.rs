@@ -7,6 +7,7 @@ use std::path::Path;
 use vpcal::detector::DetectorChoice;
 use vpcal::progress::Silent;
 use vpcal::{calibrate, run_pipeline, CalibrationFile, PipelineConfig};
+use vpcal_data::Split;
 use vpcal_formats::bcs::read_system;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::rotation::{mat_vec, rotation_matrix};
@@ -16,8 +17,12 @@ use vpcal_synth::world::LayoutKind;
 
 /// A rendered 40-frame 320x240 highway clip (the demo's scene); its folder.
 fn scene(dir: &Path) -> (std::path::PathBuf, Calibration) {
+    scene_of(dir, 40)
+}
+
+fn scene_of(dir: &Path, frames: u32) -> (std::path::PathBuf, Calibration) {
     let mut spec = SceneSpec::new("lib", LayoutKind::Highway, 3);
-    spec.frames = 40;
+    spec.frames = frames;
     spec.width = 320;
     spec.height = 240;
     let opts = WriteOptions {
@@ -127,4 +132,90 @@ fn the_opencv_export_projects_road_points_where_measure_finds_them() {
     let cv = file.opencv.as_ref().unwrap();
     let t = cv.tvec;
     assert!(((t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt() - h).abs() < 1e-9);
+}
+
+/// The angle between the lines from `at` to `a` and to `b`, degrees (at most 90).
+fn line_angle_deg(at: Point2, a: Point2, b: Point2) -> f64 {
+    vpcal::label::direction_error_deg(at, a, b)
+}
+
+#[test]
+fn label_writes_crops_whose_vp1_is_the_true_one_and_refuses_stills() {
+    use vpcal::label::{label_footage, LabelSettings};
+    use vpcal_data::SampleSource;
+    let dir = tempfile::tempdir().unwrap();
+    // Long enough for VP1 from tracks (the 40-frame clip has 3 straight tracks).
+    let (dataset, truth) = scene_of(dir.path(), 150);
+    let mut config = PipelineConfig::default();
+    config.detector.choice = DetectorChoice::File(dataset.join("detections.csv"));
+    config.bootstrap = 8;
+    let out_dir = dir.path().join("labels");
+    let settings = LabelSettings::default();
+    let (report, records) = label_footage(
+        &dataset.join("video.mp4"),
+        "lib",
+        &config,
+        &settings,
+        &out_dir,
+        &Silent,
+    )
+    .unwrap();
+    assert!(report.refused.is_none(), "{report:?}");
+    assert!(
+        report.vehicles >= 3 && report.crops == records.len(),
+        "{report:?}"
+    );
+    assert!(records.len() <= report.vehicles * settings.max_per_track);
+    // Every label's VP1, back in frame pixels, points where the true VP1 does.
+    for r in &records {
+        let vpcal_synth::SampleMeta::Real(m) = &r.meta else {
+            panic!("not a real crop: {r:?}");
+        };
+        let o = Point2::from(m.crop_origin);
+        let at = Point2::new(
+            0.5 * (m.det_box[0] + m.det_box[2]),
+            0.5 * (m.det_box[1] + m.det_box[3]),
+        );
+        let vp1 = Point2::from(r.vp1) + o;
+        let err = line_angle_deg(at, vp1, truth.vp1);
+        assert!(err < 1.5, "VP1 label {err:.2}° off at {at:?}");
+        assert!(r.label_weight.iter().all(|w| (0.0..=1.0).contains(w)));
+        assert!((m.vp1_sd_deg - report.track_residual_deg.unwrap()).abs() < 1e-12);
+    }
+    // The folder reads as training data once indexed.
+    let cfg = serde_json::json!({"format": vpcal::label::LABEL_FORMAT, "version": 1});
+    vpcal_synth::write_index(&out_dir, &cfg, &records).unwrap();
+    let all: usize = [Split::Train, Split::Validation, Split::Test]
+        .iter()
+        .map(|&s| {
+            let src = vpcal_synth::CropDirSource::open(&out_dir, s).unwrap();
+            for i in 0..src.len() {
+                let sample = src.get(i).unwrap();
+                assert_eq!(sample.label_weight, src.records()[i].label_weight);
+            }
+            src.len()
+        })
+        .sum();
+    assert_eq!(all, records.len());
+
+    // One still has no tracks: refused, nothing written.
+    let still_dir = dir.path().join("still");
+    std::fs::create_dir_all(&still_dir).unwrap();
+    image::RgbImage::from_pixel(320, 240, image::Rgb([120, 120, 120]))
+        .save(still_dir.join("one.png"))
+        .unwrap();
+    let (report, records) = label_footage(
+        &still_dir.join("one.png"),
+        "still",
+        &config,
+        &settings,
+        &dir.path().join("labels_still"),
+        &Silent,
+    )
+    .unwrap();
+    assert!(records.is_empty());
+    assert!(
+        report.refused.as_deref().unwrap_or("").contains("stills"),
+        "{report:?}"
+    );
 }

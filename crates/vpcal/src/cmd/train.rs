@@ -82,7 +82,7 @@ pub struct Args {
     /// Seed of the initialisation, the data order and the augmentation.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Augmentation of training crops: `paper`, `reference` or `none`.
+    /// Augmentation of training crops: `paper`, `reference`, `real` (the paper's plus sensor effects: occluders, exposure, colour, blur, low resolution, noise, JPEG) or `none`.
     #[arg(long, default_value = "paper")]
     pub augment: String,
     /// Stop each epoch after this many batches (quick runs on large data).
