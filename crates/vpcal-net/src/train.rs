@@ -302,10 +302,11 @@ impl<N: VpNetwork> Trainer<N> {
                 });
             }
         }
-        let device = device.clone().autodiff();
+        // Loaded on the plain device: tensors made there become leaves (trainable) when
+        // `with_model` moves the model to the autodiff device.
         device.seed(config.seed);
-        let model = weights.load_into(N::init(&config.model, &device))?;
-        Self::with_model(config, out, &device, model)
+        let model = weights.load_into(N::init(&config.model, device))?;
+        Self::with_model(config, out, device, model)
     }
 
     /// A new run in `out` starting from the given model (e.g. for fine-tuning, or to start

@@ -196,6 +196,35 @@ fn mismatching_weights_are_refused_with_names_and_shapes() {
 }
 
 #[test]
+fn a_run_started_from_a_weights_file_trains_from_those_weights() {
+    let config = small_config();
+    let source = toy(&config);
+    let device = Device::flex();
+    device.seed(4);
+    let init = StackedHourglass::new(&config, &device);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("init.safetensors");
+    vpcal_net::store::save_weights(&init, &config, "stacked_hourglass", &path).unwrap();
+    let file = WeightsFile::read(&path).unwrap();
+
+    let run = |out: &std::path::Path, from_file: bool| {
+        let mut t = if from_file {
+            Trainer::<StackedHourglass>::from_weights(train_config(&config, 1), out, &device, &file)
+        } else {
+            Trainer::with_model(train_config(&config, 1), out, &device, init.clone())
+        }
+        .unwrap()
+        .with_progress(false);
+        t.run(&source).unwrap().to_vec()
+    };
+    let a = run(&dir.path().join("file"), true);
+    let b = run(&dir.path().join("model"), false);
+    // The same start gives the same first step, and training moved the weights.
+    assert!(close(a[0].first_batch_loss, b[0].first_batch_loss));
+    assert!(a[0].last_batch_loss != a[0].first_batch_loss);
+}
+
+#[test]
 fn regression_baseline_trains_checkpoints_and_resumes() {
     use vpcal_net::regression::{NormLoss, RegressionConfig, Regressor};
     let config = RegressionConfig::tiny("resnet", NormLoss::L1).unwrap();
