@@ -4,7 +4,7 @@
 
 use crate::common;
 
-use common::{read_json, real_data, stdout, text, vpcal};
+use common::{read_json, real_data, stderr, stdout, text, vpcal};
 
 #[test]
 fn train_resume_and_predict_on_toy_data() {
@@ -14,7 +14,13 @@ fn train_resume_and_predict_on_toy_data() {
     let common = [
         "train", "--data", "toy:16", "--preset", "tiny", "--batch", "8", "--out", run_s, "--quiet",
     ];
-    let o = vpcal(&[&common[..], &["--epochs", "1", "--fg-weight", "4"]].concat());
+    let o = vpcal(
+        &[
+            &common[..],
+            &["--epochs", "1", "--fg-weight", "4", "--augment", "real"],
+        ]
+        .concat(),
+    );
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("epoch 1/1"), "{}", text(&o));
     let saved = read_json(&run.join("train_config.json"));
@@ -52,7 +58,8 @@ fn train_resume_and_predict_on_toy_data() {
         "{}",
         text(&o)
     );
-    // Resuming on another source continues at epoch 2 and records both sources.
+    // Resuming on another source continues at epoch 2, keeps the run's augmentation and
+    // records both sources.
     let o = vpcal(&[
         "train", "--resume", "--out", run_s, "--epochs", "2", "--data", "toy:24", "--quiet",
     ]);
@@ -63,12 +70,12 @@ fn train_resume_and_predict_on_toy_data() {
         text(&o)
     );
     let saved = read_json(&run.join("train_config.json"));
-    assert_eq!(saved["data"], "toy:24 augment=paper", "{saved}");
+    assert_eq!(saved["data"], "toy:24 augment=real", "{saved}");
     assert_eq!(
         saved["data_history"],
         serde_json::json!([
-            {"first_epoch": 1, "data": "toy:16 augment=paper"},
-            {"first_epoch": 2, "data": "toy:24 augment=paper"},
+            {"first_epoch": 1, "data": "toy:16 augment=real"},
+            {"first_epoch": 2, "data": "toy:24 augment=real"},
         ]),
         "{saved}"
     );
@@ -183,4 +190,54 @@ fn kitti_cars_give_the_metric_scale() {
     assert!((m - 1.0).abs() < 0.03, "{v}");
     let t = v["typical_dimensions"]["median"].as_f64().unwrap();
     assert!((t - 1.0).abs() < 0.1, "{v}");
+}
+
+#[test]
+fn synth_crops_take_the_camera_heights_and_pitches_they_are_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("low");
+    let o = vpcal(&[
+        "synth",
+        "crops",
+        "--count",
+        "6",
+        "--seed",
+        "3",
+        "--camera-height",
+        "1.2,3",
+        "--pitch",
+        "0.5,10",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let lines = std::fs::read_to_string(out.join("samples.jsonl")).unwrap();
+    let mut n = 0;
+    for line in lines.lines().filter(|l| !l.trim().is_empty()) {
+        let r: serde_json::Value = serde_json::from_str(line).unwrap();
+        let h = r["meta"]["camera_height_m"].as_f64().unwrap();
+        let p = r["meta"]["pitch_deg"].as_f64().unwrap();
+        assert!((1.2..=3.0).contains(&h), "{line}");
+        assert!((0.5..=10.0).contains(&p), "{line}");
+        n += 1;
+    }
+    assert_eq!(n, 6);
+
+    let o = vpcal(&[
+        "synth",
+        "crops",
+        "--count",
+        "2",
+        "--camera-height",
+        "1,2,3",
+        "-o",
+        dir.path().join("bad").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--camera-height takes two numbers"),
+        "{}",
+        text(&o)
+    );
+    assert!(!dir.path().join("bad/samples.jsonl").exists());
 }

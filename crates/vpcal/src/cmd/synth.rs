@@ -42,6 +42,13 @@ pub struct BgArgs {
     /// No blur/noise/low JPEG quality (JPEG 95).
     #[arg(long)]
     pub clean: bool,
+    /// Camera heights above the road, metres (default 4,18: elevated traffic cameras; e.g.
+    /// 1.2,4 for street-level and dashboard views).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub camera_height: Option<Vec<f64>>,
+    /// Camera pitch below the horizon, degrees (default 8,60; e.g. 0,12 at street level).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub pitch: Option<Vec<f64>>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -218,11 +225,22 @@ fn generator(seed: u64, bg: &BgArgs) -> Result<CropGenerator> {
         }
         None => Vec::new(),
     };
+    let defaults = CropConfig::default();
+    let pair = |flag: &str, v: &Option<Vec<f64>>, default: [f64; 2]| match v.as_deref() {
+        None => Ok(default),
+        Some([a, b]) => Ok([*a, *b]),
+        Some(other) => Err(anyhow::anyhow!(
+            "{flag} takes two numbers MIN,MAX, got {} ({other:?})",
+            other.len()
+        )),
+    };
     let cfg = CropConfig {
         real_fraction: bg.real_fraction,
         instances: bg.instances,
         artefacts: !bg.clean,
-        ..CropConfig::default()
+        height_m: pair("--camera-height", &bg.camera_height, defaults.height_m)?,
+        pitch_deg: pair("--pitch", &bg.pitch, defaults.pitch_deg)?,
+        ..defaults
     };
     Ok(CropGenerator::new(cfg, seed, Arc::new(backgrounds))?)
 }

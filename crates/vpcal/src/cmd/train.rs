@@ -16,6 +16,9 @@ use vpcal_net::{
     Trainer, VpNetwork,
 };
 
+/// The augmentation of a new run without `--augment`: the paper's.
+const DEFAULT_AUGMENT: &str = "paper";
+
 /// Which network to train.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Arch {
@@ -82,9 +85,11 @@ pub struct Args {
     /// Seed of the initialisation, the data order and the augmentation.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Augmentation of training crops: `paper`, `reference`, `real` (the paper's plus sensor effects: occluders, exposure, colour, blur, low resolution, noise, JPEG) or `none`.
-    #[arg(long, default_value = "paper")]
-    pub augment: String,
+    /// Augmentation of training crops: `paper` (default), `reference`, `real` (the paper's plus
+    /// sensor effects: occluders, exposure, colour, blur, low resolution, noise, JPEG) or
+    /// `none`. A resumed run keeps its own unless this is given.
+    #[arg(long)]
+    pub augment: Option<String>,
     /// Stop each epoch after this many batches (quick runs on large data).
     #[arg(long)]
     pub max_batches: Option<usize>,
@@ -320,11 +325,16 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
         // batches per epoch), unless --data overrides it; train_config.json then records
         // each source with the first epoch it trained.
         let saved = t.config().data.clone();
-        let (spec, augment) = match (&a.data, saved.split_once(" augment=")) {
-            (Some(d), _) => (d.clone(), a.augment.clone()),
-            (None, Some((d, aug))) => (d.to_string(), aug.to_string()),
-            (None, None) => (saved.clone(), a.augment.clone()),
+        let (saved_spec, saved_aug) = match saved.split_once(" augment=") {
+            Some((d, aug)) => (d.to_string(), Some(aug.to_string())),
+            None => (saved.clone(), None),
         };
+        let spec = a.data.clone().unwrap_or(saved_spec);
+        let augment = a
+            .augment
+            .clone()
+            .or(saved_aug)
+            .unwrap_or_else(|| DEFAULT_AUGMENT.to_string());
         let model = &t.config().model;
         let source = open_data(
             &spec,
@@ -340,12 +350,13 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
         let Some(data) = &a.data else {
             bail!("--data is required for a new run (e.g. --data toy:256)");
         };
+        let augment = a.augment.as_deref().unwrap_or(DEFAULT_AUGMENT);
         // Open the data first: a bad --data leaves no half-made run folder behind.
         let source = open_data(
             data,
             N::input_size(&model),
             N::target_codec(&model),
-            &a.augment,
+            augment,
             a.seed,
             a.workers,
         )?;
@@ -363,7 +374,7 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
         tc.seed = a.seed;
         tc.max_train_batches = a.max_batches;
         tc.max_val_batches = a.max_val_batches;
-        tc.data = format!("{data} augment={}", a.augment);
+        tc.data = format!("{data} augment={augment}");
         tc.keep_checkpoints = a.keep.max(1);
         let fg_weight = a.fg_weight.unwrap_or(0.0);
         if !(fg_weight.is_finite() && fg_weight >= 0.0) {
