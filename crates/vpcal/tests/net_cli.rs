@@ -141,8 +141,10 @@ fn train_resume_and_predict_on_toy_data() {
 
 /// Real KITTI vehicles with exact VPs: the per-vehicle measurements run end to end, and the
 /// edgelet VP2 keeps what it was measured at (`vpcal eval kitti --data
-/// $VPCAL_DATA/real/kitti_object --json`: 25 clean vehicles, 17 with enough edgelets, median
-/// 1.63°, 90th percentile 4.86°; the bundled network's VP2 4.51° / 10.3°).
+/// $VPCAL_DATA/real/kitti_object --json` with the bundled model of models/default: 25 clean
+/// vehicles, 18 with enough edgelets, median 2.24°, 90th percentile 6.19°; the network's VP1
+/// 12.4° / 54.1°, VP2 3.51° / 9.26°). The edgelets are gated by the network's VP2 ray, so
+/// these move with the bundled model (the previous one: 17 vehicles, 1.63° / 4.86°).
 #[test]
 fn kitti_per_vehicle_direction_errors() {
     let Some(dir) = real_data("real/kitti_object") else {
@@ -154,9 +156,9 @@ fn kitti_per_vehicle_direction_errors() {
     let clean = &v["clean"];
     assert_eq!(clean["vehicles"], 25);
     let edge = &clean["edgelet_vp2"];
-    assert_eq!(edge["n"], 17);
-    assert!(edge["median_deg"].as_f64().unwrap() < 2.0, "{edge}");
-    assert!(edge["p90_deg"].as_f64().unwrap() < 6.0, "{edge}");
+    assert_eq!(edge["n"], 18);
+    assert!(edge["median_deg"].as_f64().unwrap() < 2.5, "{edge}");
+    assert!(edge["p90_deg"].as_f64().unwrap() < 6.5, "{edge}");
     // The constant guess is measured too, and beats today's network on VP1 (issue 18).
     assert!(clean["pp_vp1"]["median_deg"].as_f64().unwrap() < 3.0);
     // Bad input names the file.
