@@ -3,9 +3,10 @@
 //!
 //! Each effect is applied independently with the same probability `p`, in the order a camera
 //! would: a partial occluder in the scene (a flat-ish patch entering from one side of the crop,
-//! as a pole, a sign or a neighbouring vehicle does), exposure and colour (gain, offset, white balance, saturation), optics (Gaussian
-//! blur), resolution (down-sampling then up-sampling back), sensor noise (Gaussian), and
-//! compression (JPEG at a low quality). Geometry is untouched: the VPs stay exact.
+//! as a pole, a sign or a neighbouring vehicle does), exposure and colour (gain, offset, white
+//! balance, saturation), optics (Gaussian blur), resolution (down-sampling then up-sampling
+//! back), sensor noise (Gaussian), and compression (JPEG at a low quality). Geometry is
+//! untouched: the VPs stay exact.
 //!
 //! The ranges cover what the real corpus shows (`../shared/data/traffic_corpus`: 320x240
 //! webcams with heavy compression, hazy motorway webcams, night scenes, telephoto blur):
