@@ -117,7 +117,15 @@ pub fn direction_towards(at: Point2, h: [f64; 3]) -> Option<f64> {
 /// see [`direction_towards`]), modulo 180°, in degrees `[0, 90]`. `None` when either
 /// direction is undefined.
 pub fn direction_error_deg(at: Point2, predicted: [f64; 3], truth: [f64; 3]) -> Option<f64> {
+    signed_direction_error_deg(at, predicted, truth).map(f64::abs)
+}
+
+/// [`direction_error_deg`] with its sign: the line angle from the direction towards `truth`
+/// to the direction towards `predicted`, degrees in `(-90, 90]` (positive: turned from the
+/// image's x axis towards its y axis). A median over many vehicles measures a systematic
+/// turn of the evidence rather than its scatter.
+pub fn signed_direction_error_deg(at: Point2, predicted: [f64; 3], truth: [f64; 3]) -> Option<f64> {
     let a = direction_towards(at, predicted)?;
     let b = direction_towards(at, truth)?;
-    Some(crate::aggregate::line_angle_diff(a - b).abs().to_degrees())
+    Some(crate::aggregate::line_angle_diff(a - b).to_degrees())
 }

@@ -5,7 +5,7 @@
 
 use proptest::prelude::*;
 use vpcal_geom::aggregate::edgelets::{
-    fit_curved, near_rays, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
+    self, fit_curved, near_rays, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
 };
 use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
 use vpcal_geom::aggregate::tracks::Tangent;
@@ -478,6 +478,9 @@ fn edgelets_give_the_roll_and_a_near_vp2s_focal_length() {
     let f1 = (with.calibration.focal_px / scene.f - 1.0).abs();
     assert!(e1 < 0.2, "horizon off by {e1}° (without edgelets {e0}°)");
     assert!(f1 < 0.03, "f off by {f1} (without edgelets {f0})");
+    // A near VP2: turning every edge by a degree hardly moves f.
+    let turn = ev.edgelet_focal_bias_log_spread.unwrap();
+    assert!(turn < 0.1, "a 1° turn moves ln f by {turn}");
     // Edgelets of a mismatching length are a caller's bug.
     let short = std::panic::catch_unwind(|| {
         aggregate_with_edgelets(&vehicles, &edges[1..], scene.pp, &opts)
@@ -493,6 +496,12 @@ fn edgelets_give_the_roll_and_a_near_vp2s_focal_length() {
     let ev = r.evidence;
     assert!(ev.roll_from_edgelets && !ev.focal_from_edgelets, "{ev:?}");
     assert!(ev.edgelet_vp2_widths.unwrap() > 10.0, "{ev:?}");
+    // There a one-degree turn of the edges moves f beyond what the prior already says.
+    let turn = ev.edgelet_focal_bias_log_spread.unwrap();
+    assert!(
+        turn > edgelets::MAX_FOCAL_BIAS_LOG_SPREAD,
+        "a 1° turn moves ln f by {turn}"
+    );
     let e = horizon_error(&far, &r.calibration);
     assert!(e < 0.2, "horizon off by {e}°");
 }

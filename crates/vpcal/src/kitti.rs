@@ -21,7 +21,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use vpcal_geom::aggregate::edgelets::{near_ray, Edgelet};
 use vpcal_geom::aggregate::vehicle_vp::vehicle_vp;
-use vpcal_geom::metrics::{direction_error_deg, direction_towards};
+use vpcal_geom::metrics::{direction_error_deg, direction_towards, signed_direction_error_deg};
 use vpcal_geom::{BoxPx, Point2};
 use vpcal_net::infer::VpNet;
 use vpcal_video::crop::{CropFilter, CropResizer};
@@ -227,6 +227,9 @@ pub struct VehicleResult {
     pub pp_vp1_deg: Option<f64>,
     /// VP2 from the vehicle's edgelets, degrees (`None`: too few edgelets).
     pub edgelet_vp2_deg: Option<f64>,
+    /// The same with a sign: positive when the edgelet VP2's direction is turned from the
+    /// true one towards the direction to the true VP1.
+    pub edgelet_vp2_signed_deg: Option<f64>,
     /// Edgelets found in the box, and kept for the VP2 fit.
     pub edgelets_found: usize,
     pub edgelets_used: usize,
@@ -292,6 +295,11 @@ pub fn evaluate(
                 network_vp2_deg: direction_error_deg(centre, vp2.to_h(), v.vp2),
                 pp_vp1_deg: direction_error_deg(centre, frame.pp.to_h(), v.vp1),
                 edgelet_vp2_deg: fit.and_then(|f| direction_error_deg(centre, f.point, v.vp2)),
+                edgelet_vp2_signed_deg: fit.and_then(|f| {
+                    let err = signed_direction_error_deg(centre, f.point, v.vp2)?;
+                    let vp1_side = signed_direction_error_deg(centre, v.vp1, v.vp2)?;
+                    Some(err * vp1_side.signum())
+                }),
                 edgelets_found: found.len(),
                 edgelets_used: used.len(),
                 network_vp1: finite(vp1),

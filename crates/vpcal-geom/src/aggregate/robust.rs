@@ -222,7 +222,7 @@ impl Default for RobustOptions {
 }
 
 /// How much evidence the estimate used.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Evidence {
     /// Pairs given.
     pub pairs_in: usize,
@@ -276,6 +276,9 @@ pub struct Evidence {
     /// of its VP2 from the principal point in image widths (the focal length's two gates).
     pub edgelet_focal_log_spread: Option<f64>,
     pub edgelet_vp2_widths: Option<f64>,
+    /// How far a systematic turn of the edges by `edge::EDGE_BIAS_DEG` moves the edgelet
+    /// fit's focal length (half the `ln f` difference; its third gate).
+    pub edgelet_focal_bias_log_spread: Option<f64>,
     /// How the vehicles' box sizes grow with their distance below the estimated horizon (the
     /// power of a log-log fit; 1 when they agree, see `super::sizes`); `None` with too few
     /// boxes.
@@ -1354,6 +1357,7 @@ pub fn aggregate_with_edgelets(
         edgelet_roll_sd_deg: edge_fit.map(|e| e.roll_sd_deg),
         edgelet_focal_log_spread: edge_fit.map(|e| e.focal_log_spread()),
         edgelet_vp2_widths: edge_fit.map(|e| (e.vp2 - pp).norm() / width),
+        edgelet_focal_bias_log_spread: edge_fit.map(|e| e.focal_bias_log_spread),
         size_slope: sizes.map(|s| s.slope),
     };
     let confidence = (opts.bootstrap > 0).then(|| {

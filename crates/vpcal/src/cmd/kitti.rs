@@ -38,6 +38,9 @@ struct Subset {
     network_vp2: Option<ErrorSummary>,
     pp_vp1: Option<ErrorSummary>,
     edgelet_vp2: Option<ErrorSummary>,
+    /// Median of the signed edgelet VP2 direction errors (towards VP1 positive), degrees: the
+    /// edges' systematic turn (the scatter averages out over many vehicles, this does not).
+    edgelet_vp2_median_signed_deg: Option<f64>,
 }
 
 fn subset(results: &[&VehicleResult]) -> Subset {
@@ -48,6 +51,12 @@ fn subset(results: &[&VehicleResult]) -> Subset {
         network_vp2: s(|r| r.network_vp2_deg),
         pp_vp1: s(|r| r.pp_vp1_deg),
         edgelet_vp2: s(|r| r.edgelet_vp2_deg),
+        edgelet_vp2_median_signed_deg: vpcal_geom::solve::median(
+            &results
+                .iter()
+                .filter_map(|r| r.edgelet_vp2_signed_deg)
+                .collect::<Vec<_>>(),
+        ),
     }
 }
 
@@ -118,6 +127,11 @@ pub fn run(a: KittiArgs) -> Result<()> {
             fmt(&s.pp_vp1),
             fmt(&s.edgelet_vp2)
         );
+    }
+    for (label, s) in [("clean", Some(&clean_s)), ("others", rest_s.as_ref())] {
+        if let Some(b) = s.and_then(|s| s.edgelet_vp2_median_signed_deg) {
+            println!("edgelet VP2 turned towards VP1 ({label}, median signed error): {b:+.2} deg");
+        }
     }
     Ok(())
 }
