@@ -146,6 +146,16 @@ pub struct Aggregated {
 /// network that sees real vehicles; the bundled network scatters 8-21° on real clips.
 pub const WEAK_VP1_RAY_SCATTER_DEG: f64 = 5.0;
 
+/// The straight edgelet fit's focal length when the focal length came from the curved-road
+/// fit and the two differ by more than two model errors ([`MEASURED_FOCAL_MODEL_LOG_SD`]):
+/// the tracks that made the road count as curved may bend for another reason (box centres
+/// drifting on the approaching vehicles, a slight bend far away), and nothing says which fit
+/// is right.
+fn straight_fit_disagreeing(e: &robust::Evidence, focal_px: f64) -> Option<f64> {
+    let fs = e.edgelet_focal_px.filter(|f| f.is_finite() && *f > 0.0)?;
+    (e.curved_fit && (focal_px / fs).ln().abs() > 2.0 * MEASURED_FOCAL_MODEL_LOG_SD).then_some(fs)
+}
+
 /// An edgelet VP2 farther than this many image widths from the principal point says the
 /// edges across the vehicles are parallel in the image (f > 100 widths is a 0.6° view: no
 /// traffic camera): the view looks almost straight down, or VP1 and VP2 cannot both be
@@ -178,6 +188,14 @@ impl Aggregated {
                  and everything measured from it, is weakly supported; use longer footage of \
                  moving traffic",
                 e.vp1_inliers
+            ));
+        }
+        if let Some(fs) = straight_fit_disagreeing(e, self.focal_px) {
+            out.push(format!(
+                "the curved-road fit gives a focal length of {:.0} px, the straight-road fit of \
+                 the same edges {fs:.0} px: the road may not be curved (or bends only far \
+                 away); the focal interval spans both",
+                self.focal_px
             ));
         }
         if let Some(widths) = e
@@ -396,11 +414,17 @@ pub fn aggregate(
                         FocalSource::Edgelets if !e.curved_fit => e.edgelet_focal_bias_log_spread,
                         _ => None,
                     };
-                    measured_focal_interval(
+                    let [lo, hi] = measured_focal_interval(
                         r.calibration.focal_px,
                         [c.focal_px_p16, c.focal_px_p84],
                         turn.unwrap_or(0.0),
-                    )
+                    );
+                    // A curved-road fit that the straight fit contradicts: either may be
+                    // right, so the interval spans both.
+                    match straight_fit_disagreeing(e, r.calibration.focal_px) {
+                        Some(fs) => [lo.min(fs), hi.max(fs)],
+                        None => [lo, hi],
+                    }
                 })
             };
             if let Some(c) = &r.confidence {
@@ -548,6 +572,30 @@ mod tests {
             let w = with_evidence(FocalSource::Edgelets, strong).warnings();
             assert!(w.is_empty(), "{strong:?}: {w:?}");
         }
+    }
+
+    #[test]
+    fn a_curved_fit_that_the_straight_fit_contradicts_is_flagged() {
+        let curved = |straight: f64| robust::Evidence {
+            curved_fit: true,
+            vp1_from_tracks: true,
+            edgelet_focal_px: Some(straight),
+            ..robust::Evidence::default()
+        };
+        // focal_px is 1000 in `with_evidence`.
+        let w = with_evidence(FocalSource::Edgelets, curved(300.0)).warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].contains("300 px"), "{w:?}");
+        assert!(with_evidence(FocalSource::Edgelets, curved(1200.0))
+            .warnings()
+            .is_empty());
+        let straight = robust::Evidence {
+            curved_fit: false,
+            ..curved(300.0)
+        };
+        assert!(with_evidence(FocalSource::Edgelets, straight)
+            .warnings()
+            .is_empty());
     }
 
     #[test]
