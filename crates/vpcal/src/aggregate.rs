@@ -400,6 +400,12 @@ pub fn aggregate(
             } else {
                 FocalSource::Prior
             };
+            // How far a systematic turn of the edges moves f: only the straight edgelet fit
+            // that fixed f measures it.
+            let turn_log_sd = match focal_source {
+                FocalSource::Edgelets if !e.curved_fit => e.edgelet_focal_bias_log_spread,
+                _ => None,
+            };
             let focal_interval_px = if focal_source.is_assumed() {
                 let [lo, hi] = assumed_focal_interval(image_size.0);
                 summary.push_str(&format!(
@@ -410,14 +416,10 @@ pub fn aggregate(
                 Some([lo, hi])
             } else {
                 r.confidence.as_ref().map(|c| {
-                    let turn = match focal_source {
-                        FocalSource::Edgelets if !e.curved_fit => e.edgelet_focal_bias_log_spread,
-                        _ => None,
-                    };
                     let [lo, hi] = measured_focal_interval(
                         r.calibration.focal_px,
                         [c.focal_px_p16, c.focal_px_p84],
-                        turn.unwrap_or(0.0),
+                        turn_log_sd.unwrap_or(0.0),
                     );
                     // A curved-road fit that the straight fit contradicts: either may be
                     // right, so the interval spans both.
@@ -429,14 +431,13 @@ pub fn aggregate(
             };
             if let Some(c) = &r.confidence {
                 if let (false, Some([lo, hi])) = (focal_source.is_assumed(), focal_interval_px) {
-                    let turn = match (focal_source, e.edgelet_focal_bias_log_spread) {
-                        (FocalSource::Edgelets, Some(t)) if !e.curved_fit => format!(
+                    let turn = turn_log_sd.map_or(String::new(), |t| {
+                        format!(
                             ", a {}° turn of the edges ±{:.0} %",
                             vpcal_geom::aggregate::edgelets::EDGE_BIAS_DEG,
                             100.0 * (t.exp() - 1.0)
-                        ),
-                        _ => String::new(),
-                    };
+                        )
+                    });
                     summary.push_str(&format!(
                         "; focal 68% interval {lo:.0}-{hi:.0} px from {} (bootstrap {:.0}-{:.0} \
                          px, model error ±{:.0} %{turn})",
