@@ -28,6 +28,7 @@ pub mod metrics;
 mod point;
 pub mod rotation;
 pub mod solve;
+pub mod vehicle_dims;
 pub mod vehicle_scale;
 
 pub use point::{cross, dot3, normalize3, BoxPx, Line, Point2};

@@ -96,7 +96,17 @@ pub fn cuboid_box(
     heading: f64,
     dims: [f64; 3],
 ) -> Option<BoxPx> {
-    let frame = cal.road_frame();
+    cuboid_box_in(cal, &cal.road_frame(), centre, heading, dims)
+}
+
+/// [`cuboid_box`] with the camera's road frame computed once by the caller.
+pub fn cuboid_box_in(
+    cal: &Calibration,
+    frame: &crate::camera::RoadFrame,
+    centre: [f64; 2],
+    heading: f64,
+    dims: [f64; 3],
+) -> Option<BoxPx> {
     let (s, c) = heading.sin_cos();
     let mut b = BoxPx {
         x0: f64::INFINITY,
@@ -110,7 +120,7 @@ pub fn cuboid_box(
             let x = centre[0] + dx * c - dy * s;
             let y = centre[1] + dx * s + dy * c;
             for z in [0.0, dims[2]] {
-                let p = pixel_of(cal, &frame, [x, y, z])?;
+                let p = pixel_of(cal, frame, [x, y, z])?;
                 b.x0 = b.x0.min(p.x);
                 b.y0 = b.y0.min(p.y);
                 b.x1 = b.x1.max(p.x);
@@ -119,6 +129,23 @@ pub fn cuboid_box(
         }
     }
     Some(b)
+}
+
+/// Squared misfit of a cuboid's image `fitted` against the detector box `bbox`: the sum of
+/// the four sides' squared offsets over the box's squared diagonal (infinite without an
+/// image).
+pub fn box_misfit(bbox: &BoxPx, fitted: Option<BoxPx>) -> f64 {
+    let diag2 = bbox.width().powi(2) + bbox.height().powi(2);
+    match fitted {
+        Some(b) => {
+            ((b.x0 - bbox.x0).powi(2)
+                + (b.y0 - bbox.y0).powi(2)
+                + (b.x1 - bbox.x1).powi(2)
+                + (b.y1 - bbox.y1).powi(2))
+                / diag2
+        }
+        None => f64::INFINITY,
+    }
 }
 
 /// The cuboid of proportions `dims` (metres) heading `heading` whose image fits `bbox`
@@ -137,20 +164,11 @@ pub fn fit_cuboid(
     if across.is_nan() || across <= 0.0 {
         return None;
     }
-    let diag = (bbox.width().powi(2) + bbox.height().powi(2)).sqrt();
+    let frame = cal.road_frame();
     let misfit = |p: &[f64]| -> f64 {
         let size = p[2].exp();
         let d = [size * dims[0], size * dims[1], size * dims[2]];
-        match cuboid_box(cal, [p[0], p[1]], heading, d) {
-            Some(b) => {
-                ((b.x0 - bbox.x0).powi(2)
-                    + (b.y0 - bbox.y0).powi(2)
-                    + (b.x1 - bbox.x1).powi(2)
-                    + (b.y1 - bbox.y1).powi(2))
-                    / (diag * diag)
-            }
-            None => f64::INFINITY,
-        }
+        box_misfit(&bbox, cuboid_box_in(cal, &frame, [p[0], p[1]], heading, d))
     };
     // The box's width on the road at its bottom is roughly the car's width or length seen
     // obliquely: start from a few sizes around it.

@@ -110,3 +110,62 @@ proptest! {
         prop_assert!((fit.size / size - 1.0).abs() < 0.03, "{} vs {}", fit.size, size);
     }
 }
+
+/// Boxes of a vehicle of `dims_m` driving along the road past `cal` (road x from 2 to 5
+/// camera heights, at `lateral` heights across), with the camera `height_m` above the road.
+fn track_boxes(
+    cal: &Calibration,
+    dims_m: [f64; 3],
+    lateral: f64,
+    height_m: f64,
+) -> Vec<vpcal_geom::BoxPx> {
+    let h = cal.plane_distance();
+    let units = h / height_m;
+    (0..20)
+        .filter_map(|k| {
+            let x = (2.0 + 0.15 * k as f64) * h;
+            cuboid_box(cal, [x, lateral * h], 0.0, dims_m.map(|d| d * units))
+        })
+        .collect()
+}
+
+#[test]
+fn a_track_gives_its_vehicles_length_and_height() {
+    use vpcal_geom::vehicle_dims::{fit_dims, ASSUMED_WIDTH_M};
+    for (f, tilt, yaw) in [
+        (1400.0, 18.0, 25.0),
+        (900.0, 12.0, -8.0),
+        (2200.0, 25.0, 40.0),
+    ] {
+        let cal = camera(f, tilt, yaw);
+        let height_m = 8.0;
+        let units = cal.plane_distance() / height_m;
+        // As wide as assumed: length and height exact.
+        for dims in [[4.4, 1.8, 1.5], [3.6, 1.8, 1.45], [5.2, 1.8, 2.1]] {
+            let boxes = track_boxes(&cal, dims, 0.2, height_m);
+            let d = fit_dims(&cal, &boxes, ASSUMED_WIDTH_M * units, 0.0).unwrap();
+            let (l, hh) = (d.length / units, d.height / units);
+            assert!((l / dims[0] - 1.0).abs() < 0.03, "{f} {dims:?}: length {l}");
+            assert!((d.width / units / dims[1] - 1.0).abs() < 0.03, "{d:?}");
+            assert!(
+                (hh / dims[2] - 1.0).abs() < 0.03,
+                "{f} {dims:?}: height {hh}"
+            );
+            assert!(d.rms < 0.01, "{d:?}");
+            let lateral = d.lateral / cal.plane_distance();
+            assert!(
+                (lateral - 0.2).abs() < 0.01,
+                "{f} {dims:?}: lateral {lateral}"
+            );
+        }
+        // A truck 2.5 m wide: read as a truck (the width prior pulls its width in, the
+        // length makes up for it).
+        let truck = [12.0, 2.5, 3.6];
+        let boxes = track_boxes(&cal, truck, -0.3, height_m);
+        let d = fit_dims(&cal, &boxes, ASSUMED_WIDTH_M * units, 0.0).unwrap();
+        let (l, w, hh) = (d.length / units, d.width / units, d.height / units);
+        assert!(w > 2.1 && w < 2.6, "{f}: truck width {w}");
+        assert!(hh > 3.0 && hh < 4.0, "{f}: truck height {hh}");
+        assert!(l > 10.5 && l < 14.5, "{f}: truck length {l}");
+    }
+}

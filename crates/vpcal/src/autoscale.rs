@@ -14,7 +14,7 @@ pub const SOURCE: &str = "vehicles";
 /// cuboid.
 pub fn vehicle_scale(out: &PipelineOutput, cal: &Calibration, seed: u64) -> Option<VehicleScale> {
     let link = crate::tracks::TrackSettings::default().link;
-    let tracks = crate::tracks::link_records(&out.records, &link);
+    let tracks = crate::tracks::link_boxes(&crate::tracks::record_boxes(&out.records), &link);
     let mut group = vec![0u64; out.records.len()];
     for (t, members) in tracks.iter().enumerate() {
         for &i in members {

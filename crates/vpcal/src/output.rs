@@ -332,6 +332,12 @@ fn num(v: f64) -> Value {
     }
 }
 
+/// `towards_vp1`, `from_vp1`, or none (no scale or a standing track).
+fn direction(t: &VehicleTrack) -> Option<&'static str> {
+    t.towards_vp1
+        .map(|v| if v { "towards_vp1" } else { "from_vp1" })
+}
+
 /// The tracks as JSON (`vpcal-tracks/1`, strict: non-finite numbers are null).
 pub fn tracks_json(header: &TracksHeader, tracks: &[VehicleTrack]) -> Value {
     let list: Vec<Value> = tracks
@@ -362,6 +368,12 @@ pub fn tracks_json(header: &TracksHeader, tracks: &[VehicleTrack]) -> Value {
                 "speed_fit_kmh": t.speed.map_or(Value::Null, |s| num(s.fit_kmh)),
                 "speed_windows": t.speed.map_or(0, |s| s.windows),
                 "lateral_m": t.lateral_m.map_or(Value::Null, num),
+                "lane": t.lane,
+                "direction": direction(t),
+                "length_m": t.size.map_or(Value::Null, |z| num(z.length_m)),
+                "height_m": t.size.map_or(Value::Null, |z| num(z.height_m)),
+                "width_m": t.size.map_or(Value::Null, |z| num(z.width_m)),
+                "size_misfit": t.size.map_or(Value::Null, |z| num(z.rms)),
             })
         })
         .collect();
@@ -386,12 +398,12 @@ pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
     };
     let mut s = String::from(
         "id,frame,time_s,x_px,y_px,clipped,road_x_m,road_y_m,speed_kmh,speed_uncertainty_kmh,\
-         speed_fit_kmh,lateral_m\n",
+         speed_fit_kmh,lateral_m,lane,direction,length_m,height_m\n",
     );
     for t in tracks {
         for p in &t.points {
             s.push_str(&format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 t.id,
                 p.frame,
                 opt(Some(p.time_s)),
@@ -404,6 +416,10 @@ pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
                 opt(t.speed.map(|v| v.uncertainty_kmh)),
                 opt(t.speed.map(|v| v.fit_kmh)),
                 opt(t.lateral_m),
+                t.lane.map_or(String::new(), |l| l.to_string()),
+                direction(t).unwrap_or(""),
+                opt(t.size.map(|z| z.length_m)),
+                opt(t.size.map(|z| z.height_m)),
             ));
         }
     }
@@ -443,7 +459,7 @@ pub fn run_tracks(
         });
     }
     let tracks = build_tracks(
-        &out.records,
+        &out.boxes,
         fps,
         road,
         (out.info.width, out.info.height),

@@ -196,6 +196,16 @@ pub fn open_input(input: &Path, options: &SourceOptions) -> Result<Box<dyn Frame
     Ok(source)
 }
 
+/// A detector box that may belong to a moving vehicle: kept for the network, or dropped only
+/// by the per-frame limit (the network's budget, not the tracks').
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackBox {
+    /// 0-based frame index in the source.
+    pub frame: u64,
+    pub bbox: BoxPx,
+    pub score: f32,
+}
+
 /// One vehicle box seen by the network.
 #[derive(Debug, Clone)]
 pub struct VehicleRecord {
@@ -287,6 +297,9 @@ pub struct PipelineOutput {
     pub detector: String,
     pub model: String,
     pub records: Vec<VehicleRecord>,
+    /// Every detector box of a possibly moving vehicle, in frame order (the records' boxes
+    /// and those the per-frame limit kept from the network): what tracks are linked from.
+    pub boxes: Vec<TrackBox>,
     pub stats: PipelineStats,
     /// A picture of the scene for the overlay: the last frame.
     pub picture: Option<RgbImage>,
@@ -360,6 +373,7 @@ struct Stages<'a> {
     pending: Vec<f32>,
     pending_meta: Vec<Pending>,
     records: Vec<VehicleRecord>,
+    boxes: Vec<TrackBox>,
     budget: EdgeletBudget,
     edgelet_options: EdgeletOptions,
     gate: EdgeletFitOptions,
@@ -378,6 +392,7 @@ impl<'a> Stages<'a> {
             pending: Vec::with_capacity(config.batch * crop_len),
             pending_meta: Vec::with_capacity(config.batch),
             records: Vec::new(),
+            boxes: Vec::new(),
             budget: EdgeletBudget::new(EDGELET_RECORDS),
             edgelet_options: EdgeletOptions::default(),
             gate: EdgeletFitOptions::default(),
@@ -411,6 +426,17 @@ impl<'a> Stages<'a> {
             .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
         self.stats.detections += dets.len() as u64;
         let filtered = filter.apply(frame, dets);
+        let over_limit = filtered
+            .dropped
+            .iter()
+            .filter(|(_, why)| *why == DropReason::OverLimit)
+            .map(|(d, _)| d);
+        self.boxes
+            .extend(filtered.kept.iter().chain(over_limit).map(|d| TrackBox {
+                frame: frame.index,
+                bbox: d.bbox,
+                score: d.score,
+            }));
         for (_, why) in &filtered.dropped {
             match why {
                 DropReason::LowScore => self.stats.dropped_low_score += 1,
@@ -590,6 +616,7 @@ pub fn run_pipeline_on(
     progress.finish();
     let Stages {
         mut records,
+        mut boxes,
         mut stats,
         ..
     } = stages;
@@ -601,12 +628,14 @@ pub fn run_pipeline_on(
     }
     // The replayed frames come first in the stream.
     records.sort_by_key(|r| r.frame);
+    boxes.sort_by_key(|b| b.frame);
     stats.seconds = t0.elapsed().as_secs_f64();
     Ok(PipelineOutput {
         info,
         detector: detector_name,
         model,
         records,
+        boxes,
         stats,
         picture: last_frame,
         warnings,

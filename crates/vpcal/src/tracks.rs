@@ -1,7 +1,7 @@
-//! Vehicle tracks and their speeds, from the pipeline's per-vehicle records.
+//! Vehicle tracks and their speeds, from the pipeline's detector boxes.
 //!
 //! ```text
-//! records (frame, detector box) -> link (vpcal-geom's box tracker) -> per track: contact
+//! boxes (frame, detector box) -> link (vpcal-geom's box tracker) -> per track: contact
 //!   points (box bottom centre) -> road points in metres (camera + scale) -> speed (median of
 //!   window line fits) with an uncertainty
 //! ```
@@ -9,12 +9,14 @@
 //! - **Linking** is [`vpcal_geom::aggregate::tracks::link`], the tracker whose straight tracks
 //!   give VP1: greedy, by the overlap of a box with where the track's last box is predicted
 //!   to be at constant image velocity. It needs closely spaced frames: with `--every K` the
-//!   records are K frames apart, the tracker's gap limit scales with that step (2.5 steps) and
+//!   boxes are K frames apart, the tracker's gap limit scales with that step (2.5 steps) and
 //!   times stay right (they come from the true frame indices), but a vehicle moves K times as
 //!   far between boxes and stops overlapping its prediction; on highway footage K above ~3
 //!   breaks tracks apart. A track also breaks where the detector misses a vehicle for more than
 //!   8 steps (the VP1 tracker's 2.5 are raised: learned detectors miss a vehicle for a few
-//!   frames now and then), or where `--max-per-frame` drops its box.
+//!   frames now and then). The boxes are all the detector's boxes of possibly moving
+//!   vehicles, including those `--max-per-frame` keeps from the network (on a busy highway a
+//!   quarter of them).
 //! - **Contact point**: the bottom centre of the detector's box, where the vehicle meets the
 //!   road (as in DubskaCalib's BrnoCompSpeed files). A box that touches the image border
 //!   ([`TrackSettings::border_px`]) is cut off, so its bottom centre is not the contact point:
@@ -32,17 +34,28 @@
 //!   `n_independent = points / window_points` (overlapping windows are not independent). The
 //!   fit over the whole track is reported too (`speed_fit_kmh`); the two differ when the
 //!   vehicle accelerates.
-//! - Not estimated: the vehicle's length (a 2D box does not give it without the vehicle's
-//!   3D box) and its lane (the lane markings are not known). Tracks report `lateral_m`, the
-//!   median road y of the contact point (metres across the road from the point under the
-//!   camera), from which lanes could be clustered.
+//! - **Size** ([`vpcal_geom::vehicle_dims`]): with a scale, the cuboid standing on the road
+//!   along the track whose images fit the track's boxes best: length, width (with a prior
+//!   around [`ASSUMED_WIDTH_M`]: a 2D box has four sides, a cuboid on the road five unknowns)
+//!   and height. Measured on synthetic scenes (README, "From video to a speed table").
+//! - **Lane** ([`cluster_lanes`]): the vehicles' centre lines across the road (the fitted
+//!   cuboids' centres; the box's bottom centre is off the centre line in oblique views)
+//!   cluster around the lanes' centres; lanes are the modes of their density, numbered 1, 2,
+//!   ... in the order of the road frame's y (across the road, `lateral_m`). The lane markings
+//!   are not seen: a lane no vehicle drove in is not counted, and lanes closer than
+//!   [`MIN_LANE_SPACING_M`] are one.
+//! - **Direction**: `towards_vp1` when the vehicle drives towards VP1 (road x grows),
+//!   `from_vp1` the other way.
 
+use rayon::prelude::*;
 use vpcal_formats::bcs::SystemCar;
 use vpcal_geom::aggregate::tracks::{link, TrackOptions};
 use vpcal_geom::camera::Calibration;
+use vpcal_geom::vehicle_dims::{fit_dims, ASSUMED_WIDTH_M};
+use vpcal_geom::vehicle_scale::MAX_FIT_RMS;
 use vpcal_geom::{BoxPx, Point2};
 
-use crate::pipeline::VehicleRecord;
+use crate::pipeline::{TrackBox, VehicleRecord};
 
 /// How tracks are built and speeds measured.
 #[derive(Debug, Clone, PartialEq)]
@@ -112,8 +125,112 @@ pub struct VehicleTrack {
     pub points: Vec<TrackPoint>,
     /// With a scale and enough unclipped points.
     pub speed: Option<SpeedEstimate>,
-    /// Median road y of the unclipped points, metres (with a scale).
+    /// Where across the road the vehicle drove, metres (with a scale): the median road y of
+    /// its fitted cuboids' centres, or of its contact points when no cuboid was fitted.
     pub lateral_m: Option<f64>,
+    /// The vehicle's size, with a scale and a cuboid fitted to its boxes.
+    pub size: Option<VehicleSize>,
+    /// 1-based lane ([`cluster_lanes`]), with a lateral position.
+    pub lane: Option<usize>,
+    /// With a scale and a moving track: `true` when it drives towards VP1.
+    pub towards_vp1: Option<bool>,
+}
+
+/// A vehicle's fitted size (module docs), metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleSize {
+    pub length_m: f64,
+    /// Fitted under a prior (module docs): weakly measured.
+    pub width_m: f64,
+    pub height_m: f64,
+    /// RMS misfit of the box sides, fraction of the box diagonal.
+    pub rms: f64,
+}
+
+/// Kernel width of the lateral positions' density, metres: the scatter of a vehicle's centre
+/// line within its lane (lane keeping, the fit's error) is a few decimetres.
+pub const LANE_BANDWIDTH_M: f64 = 0.5;
+
+/// Density modes closer than this are one lane, metres (the narrowest traffic lanes, urban
+/// streets, are about 2.5-2.75 m wide; motorway lanes 3.5-3.75 m).
+pub const MIN_LANE_SPACING_M: f64 = 2.2;
+
+/// A lane needs this much of the lateral positions' kernel density at its centre: about two
+/// vehicles (one vehicle alone, a lane change or a bad fit, is not a lane).
+pub const MIN_LANE_DENSITY: f64 = 1.2;
+
+/// The lane of each lateral position (metres; NaN gets none): the modes of the density of
+/// the positions marked in `support` (a Gaussian kernel of [`LANE_BANDWIDTH_M`]) that hold at
+/// least a tenth of the highest mode's density and [`MIN_LANE_DENSITY`], merged when closer
+/// than [`MIN_LANE_SPACING_M`] (the denser one stays), and the supported positions at least
+/// that far from every mode (a lane seen once); every position goes to its nearest mode,
+/// lanes numbered 1, 2, ... by position.
+pub fn cluster_lanes(lateral_m: &[f64], support: &[bool]) -> Vec<Option<usize>> {
+    let finite: Vec<f64> = lateral_m
+        .iter()
+        .zip(support)
+        .filter(|(v, s)| **s && v.is_finite())
+        .map(|(v, _)| *v)
+        .collect();
+    let (Some(lo), Some(hi)) = (
+        finite.iter().copied().reduce(f64::min),
+        finite.iter().copied().reduce(f64::max),
+    ) else {
+        return vec![None; lateral_m.len()];
+    };
+    let step = 0.05;
+    let (lo, hi) = (lo - 3.0 * LANE_BANDWIDTH_M, hi + 3.0 * LANE_BANDWIDTH_M);
+    let n = ((hi - lo) / step).ceil() as usize + 1;
+    let density: Vec<f64> = (0..n)
+        .map(|i| {
+            let x = lo + i as f64 * step;
+            finite
+                .iter()
+                .map(|v| (-0.5 * ((x - v) / LANE_BANDWIDTH_M).powi(2)).exp())
+                .sum()
+        })
+        .collect();
+    let top = density.iter().copied().fold(0.0, f64::max);
+    let least = (0.1 * top).max(MIN_LANE_DENSITY.min(0.99 * top));
+    // Local maxima, densest first; a plateau counts once (its first sample).
+    let mut peaks: Vec<(f64, f64)> = (0..n)
+        .filter(|&i| {
+            let d = density[i];
+            d >= least && (i == 0 || d > density[i - 1]) && (i + 1 == n || d >= density[i + 1])
+        })
+        .map(|i| (lo + i as f64 * step, density[i]))
+        .collect();
+    peaks.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut modes: Vec<f64> = Vec::new();
+    for (x, _) in peaks {
+        if modes.iter().all(|m| (m - x).abs() >= MIN_LANE_SPACING_M) {
+            modes.push(x);
+        }
+    }
+    // A vehicle farther than a lane spacing from every lane drove in a lane of its own
+    // (seen once); one between two lanes (changing lanes) did not.
+    let mut sorted = finite.clone();
+    sorted.sort_by(f64::total_cmp);
+    for v in sorted {
+        if modes.iter().all(|m| (m - v).abs() >= MIN_LANE_SPACING_M) {
+            modes.push(v);
+        }
+    }
+    modes.sort_by(f64::total_cmp);
+    lateral_m
+        .iter()
+        .map(|v| {
+            v.is_finite().then(|| {
+                let mut best = 0;
+                for (k, m) in modes.iter().enumerate() {
+                    if (m - v).abs() < (modes[best] - v).abs() {
+                        best = k;
+                    }
+                }
+                best + 1
+            })
+        })
+        .collect()
 }
 
 impl VehicleTrack {
@@ -134,20 +251,32 @@ pub fn contact_point(b: &BoxPx) -> Point2 {
     Point2::new((b.x0 + b.x1) / 2.0, b.y1)
 }
 
-/// Indices of `records` per track, in frame order (the box tracker's linking of the
-/// detector boxes); every record is in exactly one track.
-pub fn link_records(records: &[VehicleRecord], opts: &TrackOptions) -> Vec<Vec<usize>> {
-    let boxes: Vec<(f64, BoxPx)> = records
-        .iter()
-        .map(|r| (r.frame as f64, r.det_box))
-        .collect();
+/// Indices of `boxes` per track, in frame order (the box tracker's linking of the detector
+/// boxes); every box is in exactly one track.
+pub fn link_boxes(boxes: &[TrackBox], opts: &TrackOptions) -> Vec<Vec<usize>> {
+    let boxes: Vec<(f64, BoxPx)> = boxes.iter().map(|b| (b.frame as f64, b.bbox)).collect();
     link(&boxes, opts)
 }
 
-/// The tracks of `records` (module docs): times from `fps`, road points and speeds when
-/// `road` gives a camera and its scale (metres per road unit). `size` is the frame size.
+/// The detector boxes of `records`, for [`link_boxes`] and [`build_tracks`].
+pub fn record_boxes(records: &[VehicleRecord]) -> Vec<TrackBox> {
+    records
+        .iter()
+        .map(|r| TrackBox {
+            frame: r.frame,
+            bbox: r.det_box,
+            score: r.score,
+        })
+        .collect()
+}
+
+/// The tracks of the detector boxes `boxes` (a run's [`PipelineOutput::boxes`], module
+/// docs): times from `fps`, road points and speeds when `road` gives a camera and its scale
+/// (metres per road unit). `size` is the frame size.
+///
+/// [`PipelineOutput::boxes`]: crate::pipeline::PipelineOutput::boxes
 pub fn build_tracks(
-    records: &[VehicleRecord],
+    boxes: &[TrackBox],
     fps: f64,
     road: Option<(&Calibration, f64)>,
     size: (u32, u32),
@@ -155,18 +284,19 @@ pub fn build_tracks(
 ) -> Vec<VehicleTrack> {
     let (w, h) = (f64::from(size.0), f64::from(size.1));
     let m = settings.border_px;
-    let mut links = link_records(records, &settings.link);
+    let mut links = link_boxes(boxes, &settings.link);
     links.retain(|t| t.len() >= settings.min_points.max(1));
-    links.sort_by_key(|t| (records[t[0]].frame, t[0]));
-    links
-        .iter()
+    links.sort_by_key(|t| (boxes[t[0]].frame, t[0]));
+    // Parallel: each track's cuboid fit takes tens of milliseconds.
+    let mut tracks: Vec<VehicleTrack> = links
+        .par_iter()
         .enumerate()
         .map(|(k, t)| {
             let points: Vec<TrackPoint> = t
                 .iter()
                 .map(|&i| {
-                    let r = &records[i];
-                    let b = r.det_box;
+                    let r = &boxes[i];
+                    let b = r.bbox;
                     let clipped = b.x0 <= m || b.y0 <= m || b.x1 >= w - m || b.y1 >= h - m;
                     let image = contact_point(&b);
                     let road_m = match road {
@@ -185,19 +315,73 @@ pub fn build_tracks(
                     }
                 })
                 .collect();
+            let size = road.and_then(|(cal, scale)| vehicle_size(cal, scale, &points));
             let (times, pos): (Vec<f64>, Vec<[f64; 2]>) = points
                 .iter()
                 .filter_map(|p| p.road_m.map(|q| (p.time_s, q)))
                 .unzip();
-            let lateral_m = (!pos.is_empty()).then(|| median(pos.iter().map(|q| q[1]).collect()));
+            let towards_vp1 = (pos.len() >= 2)
+                .then(|| pos[pos.len() - 1][0] - pos[0][0])
+                .filter(|dx| *dx != 0.0 && dx.is_finite())
+                .map(|dx| dx > 0.0);
+            let lateral_m = match size {
+                Some((_, lateral)) => Some(lateral),
+                None => (!pos.is_empty()).then(|| median(pos.iter().map(|q| q[1]).collect())),
+            };
             VehicleTrack {
                 id: k as u64 + 1,
                 speed: estimate_speed(&times, &pos, settings.window_points),
                 lateral_m,
+                size: size.map(|s| s.0),
+                lane: None,
+                towards_vp1,
                 points,
             }
         })
-        .collect()
+        .collect();
+    // The lanes are where the tracks with a speed (long and moving) drove.
+    let lateral: Vec<f64> = tracks
+        .iter()
+        .map(|t| t.lateral_m.unwrap_or(f64::NAN))
+        .collect();
+    let support: Vec<bool> = tracks.iter().map(|t| t.speed.is_some()).collect();
+    let lanes = cluster_lanes(&lateral, &support);
+    for (t, lane) in tracks.iter_mut().zip(lanes) {
+        t.lane = lane;
+    }
+    tracks
+}
+
+/// The size of the vehicle whose track has `points` on the road of `cal` (metres per unit
+/// `scale`) and the road y of its centre line, metres: the cuboid fitted to its unclipped
+/// boxes ([`fit_dims`]); `None` with fewer than 3 of them or no fit, or a misfit above
+/// [`MAX_FIT_RMS`].
+fn vehicle_size(
+    cal: &Calibration,
+    scale: f64,
+    points: &[TrackPoint],
+) -> Option<(VehicleSize, f64)> {
+    let boxes: Vec<BoxPx> = points
+        .iter()
+        .filter(|p| !p.clipped && p.road_m.is_some())
+        .map(|p| p.box_px)
+        .collect();
+    if boxes.len() < 3 || !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    let d = fit_dims(cal, &boxes, ASSUMED_WIDTH_M / scale, 0.0)?;
+    // Boxes no cuboid explains (two vehicles in one box, a shadow, a partial vehicle) give
+    // no size and no centre line.
+    if d.rms > MAX_FIT_RMS {
+        return None;
+    }
+    let size = VehicleSize {
+        length_m: d.length * scale,
+        width_m: d.width * scale,
+        height_m: d.height * scale,
+        rms: d.rms,
+    };
+    Some((size, d.lateral * scale))
 }
 
 /// Median of `v` (NaN when empty).
@@ -381,6 +565,72 @@ mod tests {
         }
     }
 
+    #[test]
+    fn lanes_are_the_clusters_of_lateral_positions() {
+        // Three lanes 3.5 m apart, vehicles scattered ±0.4 m in each, given in mixed order.
+        let mut rng = Lcg(11);
+        let truth: Vec<usize> = (0..60).map(|i| (i * 7) % 3).collect();
+        let lateral: Vec<f64> = truth
+            .iter()
+            .map(|&l| -4.0 + 3.5 * l as f64 + 0.4 * rng.next())
+            .collect();
+        let lanes = cluster_lanes(&lateral, &[true; 60]);
+        for (t, l) in truth.iter().zip(&lanes) {
+            assert_eq!(Some(t + 1), *l);
+        }
+        // One lane: one cluster. Nothing finite: no lanes.
+        let one: Vec<f64> = (0..20).map(|_| 1.0 + 0.5 * rng.next()).collect();
+        assert!(cluster_lanes(&one, &[true; 20])
+            .iter()
+            .all(|l| *l == Some(1)));
+        assert_eq!(
+            cluster_lanes(&[f64::NAN, 2.0], &[true; 2]),
+            vec![None, Some(1)]
+        );
+        assert!(cluster_lanes(&[], &[]).is_empty());
+        // A lone vehicle between two lanes (a lane change) is not a lane of its own, and
+        // positions without support (short tracks) are assigned but make no lane.
+        let mut with_stray = lateral.clone();
+        with_stray.push(-4.0 + 1.75);
+        with_stray.push(-4.0 + 5.25);
+        let mut support = vec![true; 61];
+        support.push(false);
+        let lanes = cluster_lanes(&with_stray, &support);
+        assert!(lanes.iter().all(|l| matches!(l, Some(1..=3))), "{lanes:?}");
+        // A lone vehicle a lane's width beyond the others is a lane of its own.
+        let mut beyond = lateral.clone();
+        beyond.push(-4.0 + 3.5 * 3.0);
+        let lanes = cluster_lanes(&beyond, &[true; 61]);
+        assert_eq!(lanes[60], Some(4));
+        assert_eq!(lanes[..60], cluster_lanes(&lateral, &[true; 60])[..]);
+    }
+
+    /// A property: lanes at least 2.8 m apart with ±0.5 m scatter are told apart, whatever
+    /// their number, spacing and offset; a position's lane never depends on the order.
+    #[test]
+    fn lanes_are_found_for_any_spacing_and_order() {
+        let mut rng = Lcg(5);
+        for _ in 0..200 {
+            let lanes = 1 + ((rng.next() + 1.0) * 2.5) as usize;
+            let width = 3.15 + 0.35 * rng.next();
+            let offset = 10.0 * rng.next();
+            let truth: Vec<usize> = (0..8 * lanes).map(|i| i % lanes).collect();
+            let lateral: Vec<f64> = truth
+                .iter()
+                .map(|&l| offset + width * l as f64 + 0.5 * rng.next())
+                .collect();
+            let all = vec![true; lateral.len()];
+            let found = cluster_lanes(&lateral, &all);
+            for (t, l) in truth.iter().zip(&found) {
+                assert_eq!(Some(t + 1), *l, "{lanes} lanes of {width} m");
+            }
+            let reversed: Vec<f64> = lateral.iter().rev().copied().collect();
+            let again: Vec<Option<usize>> =
+                cluster_lanes(&reversed, &all).into_iter().rev().collect();
+            assert_eq!(found, again);
+        }
+    }
+
     fn record(frame: u64, b: BoxPx) -> VehicleRecord {
         VehicleRecord {
             frame,
@@ -412,7 +662,13 @@ mod tests {
             records.push(record(f, BoxPx::new(500.0, y, 560.0, y + 40.0)));
         }
         records.sort_by_key(|r| r.frame);
-        let tracks = build_tracks(&records, 25.0, None, (640, 342), &TrackSettings::default());
+        let tracks = build_tracks(
+            &record_boxes(&records),
+            25.0,
+            None,
+            (640, 342),
+            &TrackSettings::default(),
+        );
         assert_eq!(tracks.len(), 2);
         for t in &tracks {
             assert_eq!(t.points.len(), 20);

@@ -414,7 +414,9 @@ def aggregate(
 @dataclass
 class Track:
     """One vehicle's track: image points (the box's bottom centre, where it meets the road),
-    road points in metres and a speed when the calibration has a metric scale."""
+    and with a metric scale road points in metres, a speed, the lane (1, 2, ... across the
+    road), the direction (``towards_vp1``/``from_vp1``) and the vehicle's length and height
+    (a cuboid fitted to its boxes, 1.8 m wide by assumption)."""
 
     id: int
     frames: np.ndarray
@@ -426,6 +428,10 @@ class Track:
     speed_uncertainty_kmh: Optional[float]
     speed_fit_kmh: Optional[float]
     lateral_m: Optional[float]
+    lane: Optional[int]
+    direction: Optional[str]
+    length_m: Optional[float]
+    height_m: Optional[float]
 
     @staticmethod
     def _from_json(t: Dict[str, Any]) -> "Track":
@@ -446,6 +452,10 @@ class Track:
             speed_uncertainty_kmh=t.get("speed_uncertainty_kmh"),
             speed_fit_kmh=t.get("speed_fit_kmh"),
             lateral_m=t.get("lateral_m"),
+            lane=t.get("lane"),
+            direction=t.get("direction"),
+            length_m=t.get("length_m"),
+            height_m=t.get("height_m"),
         )
 
 

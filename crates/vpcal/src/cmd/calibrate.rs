@@ -36,9 +36,10 @@ pub struct Args {
     /// Also write the vehicle tracks: `.csv` (one row per track point: id, frame, time_s,
     /// x_px, y_px (the box's bottom centre, where the vehicle meets the road), clipped,
     /// road_x_m, road_y_m, and the track's speed_kmh, speed_uncertainty_kmh, speed_fit_kmh,
-    /// lateral_m) or JSON (any other name; vpcal-tracks/1, the same fields per track). Road
-    /// points and speeds need a metric scale (--scale-points/--scale-distance). Needs
-    /// consecutive frames: a video, or an image folder with --fps.
+    /// lateral_m, lane, direction, length_m, height_m) or JSON (any other name;
+    /// vpcal-tracks/1, the same fields per track). Road points, speeds, lanes and sizes need a
+    /// metric scale (given, or the automatic one). Needs consecutive frames: a video, or an
+    /// image folder with --fps.
     #[arg(long, value_name = "FILE")]
     pub tracks: Option<PathBuf>,
     /// Two road points a known distance apart, pixels x1,y1,x2,y2 (as `vpcal scale
