@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Per-vehicle size and lane of `vpcal calibrate --tracks` against a synthetic scene's truth.
+"""Per-vehicle lane (and size, where the tracks have one) of `vpcal calibrate --tracks` against a
+synthetic scene's truth.
 
 usage: scripts/track_sizes.py SCENE_DIR [SCENE_DIR ...] [--vpcal BIN] [--detections true|motion|yolox]
        [--scale taped|auto] [--out DIR]
@@ -61,8 +62,6 @@ def main():
         errs = defaultdict(list)
         matched = []
         for t in tracks:
-            if t.get("length_m") is None:
-                continue
             votes = Counter()
             n = len(t["frames"])
             for k in range(n):
@@ -82,10 +81,11 @@ def main():
             vid, c = votes.most_common(1)[0]
             if c < 0.5 * n:
                 continue
-            tl, tw, th = dims[vid]
-            errs["length"].append(t["length_m"] / tl - 1)
-            errs["width"].append(t["width_m"] / tw - 1)
-            errs["height"].append(t["height_m"] / th - 1)
+            if t.get("length_m") is not None:
+                tl, tw, th = dims[vid]
+                errs["length"].append(t["length_m"] / tl - 1)
+                errs["width"].append(t["width_m"] / tw - 1)
+                errs["height"].append(t["height_m"] / th - 1)
             if vid in lane_of and t.get("lane") is not None:
                 matched.append((lane_of[vid], t["lane"], t["direction"]))
         agree = total = 0
@@ -99,7 +99,7 @@ def main():
             return f"{100 * st.median([abs(x) for x in v]):.1f}%" if v else "-"
         lanes_true = len({m[0] for m in matched})
         lanes_found = len({m[1] for m in matched})
-        print(f"{name}: {len(tracks)} tracks, {len(errs['length'])} sized and matched; "
+        print(f"{name}: {len(tracks)} tracks, {len(matched)} matched with a lane, {len(errs['length'])} sized; "
               f"length median {med(errs['length'])} (|.| {mabs(errs['length'])}), "
               f"width {med(errs['width'])}, height {med(errs['height'])} (|.| {mabs(errs['height'])}); "
               f"lanes true {lanes_true} found {lanes_found}, pair agreement "
@@ -109,11 +109,11 @@ def main():
         pooled["agree"].append(agree)
         pooled["pairs"].append(total)
     if pooled["length"]:
-        print(f"pooled: {len(pooled['length'])} vehicles; |length error| median "
+        print(f"pooled sizes: {len(pooled['length'])} vehicles; |length error| median "
               f"{100 * st.median([abs(x) for x in pooled['length']]):.1f}%, length bias "
               f"{100 * st.median(pooled['length']):+.1f}%, |height| "
-              f"{100 * st.median([abs(x) for x in pooled['height']]):.1f}%; lane pairs "
-              f"{sum(pooled['agree'])}/{sum(pooled['pairs'])}")
+              f"{100 * st.median([abs(x) for x in pooled['height']]):.1f}%")
+    print(f"pooled lanes: pairs agreeing {sum(pooled['agree'])}/{sum(pooled['pairs'])}")
 
 
 if __name__ == "__main__":

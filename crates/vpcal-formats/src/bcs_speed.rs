@@ -1095,8 +1095,11 @@ mod tests {
             prop_assert!((c.frame - (f0 + s / px_per_frame)).abs() < 1e-6);
         }
 
-        /// Constant speed along the road is measured exactly by the median mode and to 0.5 %
-        /// by the full mode, whatever the speed, frame rate, scale and lateral position.
+        /// Constant speed along the road is measured exactly by the median mode and to 1 %
+        /// by the full mode, whatever the speed, frame rate, scale and lateral position (the
+        /// full mode interpolates the crossing frames linearly in image distance, which
+        /// perspective bends: the longer a frame's step, the larger the error; 0.51 % at
+        /// 145 km/h, 25 frames/s and the smallest scale, 0.01 m per unit).
         #[test]
         fn road_speed_is_exact(
             kmh in 20.0..160.0f64,
@@ -1113,7 +1116,7 @@ mod tests {
             let t = prefilter_car(&car, &s).unwrap();
             let m = measure(&t, &s, &road).unwrap();
             // Full mode: see `constant_speed_is_measured_in_both_modes`.
-            prop_assert!((m.full_kmh - kmh).abs() < 5e-3 * kmh, "full {}", m.full_kmh);
+            prop_assert!((m.full_kmh - kmh).abs() < 1e-2 * kmh, "full {}", m.full_kmh);
             prop_assert!((m.median_kmh - kmh).abs() < 1e-6 * kmh);
         }
 

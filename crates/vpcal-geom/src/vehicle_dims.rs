@@ -58,6 +58,10 @@ pub struct VehicleDims {
     pub rms: f64,
     /// Boxes fitted.
     pub boxes: usize,
+    /// RMS change of the box sides (fraction of the diagonal) when the length changes by a
+    /// quarter either way, the other dimensions held and the centres refitted: how well the
+    /// boxes see the length.
+    pub length_sensitivity: f64,
 }
 
 /// The best cuboid centre for `bbox` with dimensions `dims` (plane units), with its squared
@@ -134,7 +138,23 @@ pub fn fit_dims(
         .iter()
         .map(|(b, q)| fit_centre(cal, &frame, b, heading, best, *q).x[1])
         .collect();
+    // How far the boxes move when the length changes by a quarter (centres refitted): RMS
+    // per box side, fraction of the diagonal. Below the boxes' own error the length is not
+    // seen (a vehicle seen end-on from low down).
+    let fitted = |dims: [f64; 3]| -> f64 {
+        starts
+            .iter()
+            .map(|(b, q)| fit_centre(cal, &frame, b, heading, dims, *q).value)
+            .sum::<f64>()
+    };
+    let base = fitted(best);
+    let moved = [1.25, 0.8]
+        .map(|k| fitted([best[0] * k, best[1], best[2]]) - base)
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
+    let length_sensitivity = (moved.max(0.0) / (4.0 * starts.len() as f64)).sqrt();
     let dims = VehicleDims {
+        length_sensitivity,
         length: best[0],
         width: best[1],
         height: best[2],

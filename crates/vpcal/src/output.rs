@@ -370,10 +370,6 @@ pub fn tracks_json(header: &TracksHeader, tracks: &[VehicleTrack]) -> Value {
                 "lateral_m": t.lateral_m.map_or(Value::Null, num),
                 "lane": t.lane,
                 "direction": direction(t),
-                "length_m": t.size.map_or(Value::Null, |z| num(z.length_m)),
-                "height_m": t.size.map_or(Value::Null, |z| num(z.height_m)),
-                "width_m": t.size.map_or(Value::Null, |z| num(z.width_m)),
-                "size_misfit": t.size.map_or(Value::Null, |z| num(z.rms)),
             })
         })
         .collect();
@@ -398,12 +394,12 @@ pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
     };
     let mut s = String::from(
         "id,frame,time_s,x_px,y_px,clipped,road_x_m,road_y_m,speed_kmh,speed_uncertainty_kmh,\
-         speed_fit_kmh,lateral_m,lane,direction,length_m,height_m\n",
+         speed_fit_kmh,lateral_m,lane,direction\n",
     );
     for t in tracks {
         for p in &t.points {
             s.push_str(&format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 t.id,
                 p.frame,
                 opt(Some(p.time_s)),
@@ -418,8 +414,6 @@ pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
                 opt(t.lateral_m),
                 t.lane.map_or(String::new(), |l| l.to_string()),
                 direction(t).unwrap_or(""),
-                opt(t.size.map(|z| z.length_m)),
-                opt(t.size.map(|z| z.height_m)),
             ));
         }
     }
@@ -474,6 +468,20 @@ pub fn tracks_line(tracks: &[VehicleTrack], header: &TracksHeader) -> String {
     let mut line = format!("tracks: {n}, {with_speed} with a speed");
     if let Some(m) = median {
         line.push_str(&format!(", median speed {m:.1} km/h"));
+    }
+    let lanes = tracks.iter().filter_map(|t| t.lane).max().unwrap_or(0);
+    if lanes > 0 {
+        let towards = tracks
+            .iter()
+            .filter(|t| t.towards_vp1 == Some(true))
+            .count();
+        let from = tracks
+            .iter()
+            .filter(|t| t.towards_vp1 == Some(false))
+            .count();
+        line.push_str(&format!(
+            ", {lanes} lanes, {towards} towards VP1 and {from} from it"
+        ));
     }
     if let Some(note) = &header.note {
         line.push_str(&format!(" ({note})"));

@@ -34,25 +34,21 @@
 //!   `n_independent = points / window_points` (overlapping windows are not independent). The
 //!   fit over the whole track is reported too (`speed_fit_kmh`); the two differ when the
 //!   vehicle accelerates.
-//! - **Size** ([`vpcal_geom::vehicle_dims`]): with a scale, the cuboid standing on the road
-//!   along the track whose images fit the track's boxes best: length, width (with a prior
-//!   around [`ASSUMED_WIDTH_M`]: a 2D box has four sides, a cuboid on the road five unknowns)
-//!   and height. Measured on synthetic scenes (README, "From video to a speed table").
-//! - **Lane** ([`cluster_lanes`]): the vehicles' centre lines across the road (the fitted
-//!   cuboids' centres; the box's bottom centre is off the centre line in oblique views)
-//!   cluster around the lanes' centres; lanes are the modes of their density, numbered 1, 2,
-//!   ... in the order of the road frame's y (across the road, `lateral_m`). The lane markings
-//!   are not seen: a lane no vehicle drove in is not counted, and lanes closer than
+//! - **Size**: not estimated. [`vpcal_geom::vehicle_dims`] fits a cuboid to a track's boxes
+//!   and gets synthetic vehicles' lengths within a few percent, but on the real highway clip
+//!   `bgslibrary_video02` (YOLOX boxes of 20-40 px, focal length known to ±20 %) its lengths
+//!   spread from 0.4 to 40 m, so tracks do not report it.
+//! - **Lane** ([`cluster_lanes`]): the vehicles' lateral positions (`lateral_m`, the median
+//!   road y of their contact points) cluster around the lanes; lanes are the modes of their
+//!   density, numbered 1, 2, ... in the order of the road frame's y. The lane markings are not
+//!   seen: a lane no vehicle drove in is not counted, and lanes closer than
 //!   [`MIN_LANE_SPACING_M`] are one.
 //! - **Direction**: `towards_vp1` when the vehicle drives towards VP1 (road x grows),
 //!   `from_vp1` the other way.
 
-use rayon::prelude::*;
 use vpcal_formats::bcs::SystemCar;
 use vpcal_geom::aggregate::tracks::{link, TrackOptions};
 use vpcal_geom::camera::Calibration;
-use vpcal_geom::vehicle_dims::{fit_dims, ASSUMED_WIDTH_M};
-use vpcal_geom::vehicle_scale::MAX_FIT_RMS;
 use vpcal_geom::{BoxPx, Point2};
 
 use crate::pipeline::{TrackBox, VehicleRecord};
@@ -126,25 +122,12 @@ pub struct VehicleTrack {
     /// With a scale and enough unclipped points.
     pub speed: Option<SpeedEstimate>,
     /// Where across the road the vehicle drove, metres (with a scale): the median road y of
-    /// its fitted cuboids' centres, or of its contact points when no cuboid was fitted.
+    /// its unclipped contact points.
     pub lateral_m: Option<f64>,
-    /// The vehicle's size, with a scale and a cuboid fitted to its boxes.
-    pub size: Option<VehicleSize>,
     /// 1-based lane ([`cluster_lanes`]), with a lateral position.
     pub lane: Option<usize>,
     /// With a scale and a moving track: `true` when it drives towards VP1.
     pub towards_vp1: Option<bool>,
-}
-
-/// A vehicle's fitted size (module docs), metres.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct VehicleSize {
-    pub length_m: f64,
-    /// Fitted under a prior (module docs): weakly measured.
-    pub width_m: f64,
-    pub height_m: f64,
-    /// RMS misfit of the box sides, fraction of the box diagonal.
-    pub rms: f64,
 }
 
 /// Kernel width of the lateral positions' density, metres: the scatter of a vehicle's centre
@@ -287,9 +270,8 @@ pub fn build_tracks(
     let mut links = link_boxes(boxes, &settings.link);
     links.retain(|t| t.len() >= settings.min_points.max(1));
     links.sort_by_key(|t| (boxes[t[0]].frame, t[0]));
-    // Parallel: each track's cuboid fit takes tens of milliseconds.
     let mut tracks: Vec<VehicleTrack> = links
-        .par_iter()
+        .iter()
         .enumerate()
         .map(|(k, t)| {
             let points: Vec<TrackPoint> = t
@@ -315,7 +297,6 @@ pub fn build_tracks(
                     }
                 })
                 .collect();
-            let size = road.and_then(|(cal, scale)| vehicle_size(cal, scale, &points));
             let (times, pos): (Vec<f64>, Vec<[f64; 2]>) = points
                 .iter()
                 .filter_map(|p| p.road_m.map(|q| (p.time_s, q)))
@@ -324,15 +305,11 @@ pub fn build_tracks(
                 .then(|| pos[pos.len() - 1][0] - pos[0][0])
                 .filter(|dx| *dx != 0.0 && dx.is_finite())
                 .map(|dx| dx > 0.0);
-            let lateral_m = match size {
-                Some((_, lateral)) => Some(lateral),
-                None => (!pos.is_empty()).then(|| median(pos.iter().map(|q| q[1]).collect())),
-            };
+            let lateral_m = (!pos.is_empty()).then(|| median(pos.iter().map(|q| q[1]).collect()));
             VehicleTrack {
                 id: k as u64 + 1,
                 speed: estimate_speed(&times, &pos, settings.window_points),
                 lateral_m,
-                size: size.map(|s| s.0),
                 lane: None,
                 towards_vp1,
                 points,
@@ -350,38 +327,6 @@ pub fn build_tracks(
         t.lane = lane;
     }
     tracks
-}
-
-/// The size of the vehicle whose track has `points` on the road of `cal` (metres per unit
-/// `scale`) and the road y of its centre line, metres: the cuboid fitted to its unclipped
-/// boxes ([`fit_dims`]); `None` with fewer than 3 of them or no fit, or a misfit above
-/// [`MAX_FIT_RMS`].
-fn vehicle_size(
-    cal: &Calibration,
-    scale: f64,
-    points: &[TrackPoint],
-) -> Option<(VehicleSize, f64)> {
-    let boxes: Vec<BoxPx> = points
-        .iter()
-        .filter(|p| !p.clipped && p.road_m.is_some())
-        .map(|p| p.box_px)
-        .collect();
-    if boxes.len() < 3 || !(scale > 0.0 && scale.is_finite()) {
-        return None;
-    }
-    let d = fit_dims(cal, &boxes, ASSUMED_WIDTH_M / scale, 0.0)?;
-    // Boxes no cuboid explains (two vehicles in one box, a shadow, a partial vehicle) give
-    // no size and no centre line.
-    if d.rms > MAX_FIT_RMS {
-        return None;
-    }
-    let size = VehicleSize {
-        length_m: d.length * scale,
-        width_m: d.width * scale,
-        height_m: d.height * scale,
-        rms: d.rms,
-    };
-    Some((size, d.lateral * scale))
 }
 
 /// Median of `v` (NaN when empty).

@@ -415,8 +415,7 @@ def aggregate(
 class Track:
     """One vehicle's track: image points (the box's bottom centre, where it meets the road),
     and with a metric scale road points in metres, a speed, the lane (1, 2, ... across the
-    road), the direction (``towards_vp1``/``from_vp1``) and the vehicle's length and height
-    (a cuboid fitted to its boxes, 1.8 m wide by assumption)."""
+    road) and the direction (``towards_vp1``/``from_vp1``)."""
 
     id: int
     frames: np.ndarray
@@ -430,8 +429,6 @@ class Track:
     lateral_m: Optional[float]
     lane: Optional[int]
     direction: Optional[str]
-    length_m: Optional[float]
-    height_m: Optional[float]
 
     @staticmethod
     def _from_json(t: Dict[str, Any]) -> "Track":
@@ -454,8 +451,6 @@ class Track:
             lateral_m=t.get("lateral_m"),
             lane=t.get("lane"),
             direction=t.get("direction"),
-            length_m=t.get("length_m"),
-            height_m=t.get("height_m"),
         )
 
 

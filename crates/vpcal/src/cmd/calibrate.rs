@@ -36,9 +36,9 @@ pub struct Args {
     /// Also write the vehicle tracks: `.csv` (one row per track point: id, frame, time_s,
     /// x_px, y_px (the box's bottom centre, where the vehicle meets the road), clipped,
     /// road_x_m, road_y_m, and the track's speed_kmh, speed_uncertainty_kmh, speed_fit_kmh,
-    /// lateral_m, lane, direction, length_m, height_m) or JSON (any other name;
-    /// vpcal-tracks/1, the same fields per track). Road points, speeds, lanes and sizes need a
-    /// metric scale (given, or the automatic one). Needs consecutive frames: a video, or an
+    /// lateral_m, lane, direction) or JSON (any other name; vpcal-tracks/1, the same fields
+    /// per track). Road points, speeds and lanes need a metric scale (given, or the automatic
+    /// one). Needs consecutive frames: a video, or an
     /// image folder with --fps.
     #[arg(long, value_name = "FILE")]
     pub tracks: Option<PathBuf>,
