@@ -121,16 +121,18 @@ pub fn fit_dims(
         width.ln(),
     ];
     let spread = [LENGTH_LOG_SD, HEIGHT_LOG_SD, WIDTH_LOG_SD];
-    let total = |p: &[f64]| -> f64 {
-        let dims = [p[0].exp(), p[2].exp(), p[1].exp()];
-        let prior: f64 = (0..3)
-            .map(|k| ((p[k] - start[k]) / spread[k]).powi(2))
-            .sum();
+    // The boxes' total squared misfit for dimensions `dims`, each box's centre refitted.
+    let fitted = |dims: [f64; 3]| -> f64 {
         starts
             .iter()
             .map(|(b, q)| fit_centre(cal, &frame, b, heading, dims, *q).value)
             .sum::<f64>()
-            + 4.0 * BOX_SIDE_SD * BOX_SIDE_SD * prior
+    };
+    let total = |p: &[f64]| -> f64 {
+        let prior: f64 = (0..3)
+            .map(|k| ((p[k] - start[k]) / spread[k]).powi(2))
+            .sum();
+        fitted([p[0].exp(), p[2].exp(), p[1].exp()]) + 4.0 * BOX_SIDE_SD * BOX_SIDE_SD * prior
     };
     let m = nelder_mead(total, &start, &[0.4, 0.3, 0.1], 300);
     let best = [m.x[0].exp(), m.x[2].exp(), m.x[1].exp()];
@@ -141,12 +143,6 @@ pub fn fit_dims(
     // How far the boxes move when the length changes by a quarter (centres refitted): RMS
     // per box side, fraction of the diagonal. Below the boxes' own error the length is not
     // seen (a vehicle seen end-on from low down).
-    let fitted = |dims: [f64; 3]| -> f64 {
-        starts
-            .iter()
-            .map(|(b, q)| fit_centre(cal, &frame, b, heading, dims, *q).value)
-            .sum::<f64>()
-    };
     let base = fitted(best);
     let moved = [1.25, 0.8]
         .map(|k| fitted([best[0] * k, best[1], best[2]]) - base)

@@ -130,8 +130,8 @@ pub struct VehicleTrack {
     pub towards_vp1: Option<bool>,
 }
 
-/// Kernel width of the lateral positions' density, metres: the scatter of a vehicle's centre
-/// line within its lane (lane keeping, the fit's error) is a few decimetres.
+/// Kernel width of the lateral positions' density, metres: the scatter of vehicles' contact
+/// points within a lane (lane keeping, box jitter) is a few decimetres.
 pub const LANE_BANDWIDTH_M: f64 = 0.5;
 
 /// Density modes closer than this are one lane, metres (the narrowest traffic lanes, urban

@@ -38,8 +38,7 @@ pub struct Args {
     /// road_x_m, road_y_m, and the track's speed_kmh, speed_uncertainty_kmh, speed_fit_kmh,
     /// lateral_m, lane, direction) or JSON (any other name; vpcal-tracks/1, the same fields
     /// per track). Road points, speeds and lanes need a metric scale (given, or the automatic
-    /// one). Needs consecutive frames: a video, or an
-    /// image folder with --fps.
+    /// one). Needs consecutive frames: a video, or an image folder with --fps.
     #[arg(long, value_name = "FILE")]
     pub tracks: Option<PathBuf>,
     /// Two road points a known distance apart, pixels x1,y1,x2,y2 (as `vpcal scale
