@@ -2,8 +2,8 @@
 //!
 //! ```text
 //! boxes (frame, detector box) -> link (vpcal-geom's box tracker) -> per track: contact
-//!   points (box bottom centre) -> road points in metres (camera + scale) -> speed (median of
-//!   window line fits) with an uncertainty
+//!   points (box bottom centre) -> road points in metres (camera + scale) -> pieces of one
+//!   vehicle stitched on the road -> speed (median of window line fits) with an uncertainty
 //! ```
 //!
 //! - **Linking** is [`vpcal_geom::aggregate::tracks::link`], the tracker whose straight tracks
@@ -17,6 +17,13 @@
 //!   frames now and then). The boxes are all the detector's boxes of possibly moving
 //!   vehicles, including those `--max-per-frame` keeps from the network (on a busy highway a
 //!   quarter of them).
+//! - **Stitching** ([`stitch`], with a camera and scale): the tracker cuts a track where a box
+//!   changes suddenly (the boxes of two vehicles merge or split, a vehicle is missed for a
+//!   while). On the road the pieces of one vehicle line up: a piece that starts within a
+//!   second after another ends, where the earlier one's velocity puts it (within 1 m across
+//!   and 2 m + 10 % of the gap's distance along), continues it. On the synthetic speed scenes
+//!   with the motion detector this joined about a third of the broken tracks (recall of the
+//!   speed evaluation 0.77 → 0.81, false positives 28 → 20).
 //! - **Contact point**: the bottom centre of the detector's box, where the vehicle meets the
 //!   road (as in DubskaCalib's BrnoCompSpeed files). A box that touches the image border
 //!   ([`TrackSettings::border_px`]) is cut off, so its bottom centre is not the contact point:
@@ -64,6 +71,36 @@ pub struct TrackSettings {
     pub window_points: usize,
     /// A box whose edge is within this many pixels of the image border is clipped.
     pub border_px: f64,
+    /// When the pieces of one vehicle's track are joined.
+    pub stitch: StitchSettings,
+}
+
+/// When [`stitch`] joins two track pieces: the later one starts within `max_gap_s` after the
+/// earlier one ends, where the earlier one's constant-velocity motion on the road predicts it,
+/// within `max_lateral_m` across its direction and `along_m + along_frac · distance travelled
+/// in the gap` along it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StitchSettings {
+    pub max_gap_s: f64,
+    pub max_lateral_m: f64,
+    pub along_m: f64,
+    pub along_frac: f64,
+}
+
+impl Default for StitchSettings {
+    fn default() -> StitchSettings {
+        StitchSettings {
+            // The box tracker bridges gaps of 8 frames in the image; on the road a vehicle can
+            // be followed further (a second at 25 frames/s).
+            max_gap_s: 1.0,
+            // Half a lane: a vehicle in the next lane is about 3.5 m away.
+            max_lateral_m: 1.0,
+            // Contact points jitter by a few decimetres and a short piece's speed is known
+            // to ~10 %.
+            along_m: 2.0,
+            along_frac: 0.1,
+        }
+    }
 }
 
 impl Default for TrackSettings {
@@ -79,6 +116,7 @@ impl Default for TrackSettings {
             min_points: 3,
             window_points: 10,
             border_px: 2.0,
+            stitch: StitchSettings::default(),
         }
     }
 }
@@ -267,15 +305,11 @@ pub fn build_tracks(
 ) -> Vec<VehicleTrack> {
     let (w, h) = (f64::from(size.0), f64::from(size.1));
     let m = settings.border_px;
-    let mut links = link_boxes(boxes, &settings.link);
-    links.retain(|t| t.len() >= settings.min_points.max(1));
-    links.sort_by_key(|t| (boxes[t[0]].frame, t[0]));
-    let mut tracks: Vec<VehicleTrack> = links
+    let links = link_boxes(boxes, &settings.link);
+    let mut pieces: Vec<Vec<TrackPoint>> = links
         .iter()
-        .enumerate()
-        .map(|(k, t)| {
-            let points: Vec<TrackPoint> = t
-                .iter()
+        .map(|t| {
+            t.iter()
                 .map(|&i| {
                     let r = &boxes[i];
                     let b = r.bbox;
@@ -296,7 +330,18 @@ pub fn build_tracks(
                         road_m,
                     }
                 })
-                .collect();
+                .collect()
+        })
+        .collect();
+    if road.is_some() {
+        pieces = stitch(pieces, &settings.stitch);
+    }
+    pieces.retain(|t| t.len() >= settings.min_points.max(1));
+    pieces.sort_by_key(|t| t[0].frame);
+    let mut tracks: Vec<VehicleTrack> = pieces
+        .into_iter()
+        .enumerate()
+        .map(|(k, points)| {
             let (times, pos): (Vec<f64>, Vec<[f64; 2]>) = points
                 .iter()
                 .filter_map(|p| p.road_m.map(|q| (p.time_s, q)))
@@ -327,6 +372,136 @@ pub fn build_tracks(
         t.lane = lane;
     }
     tracks
+}
+
+/// Where a piece of track is at its start and end on the road: the mean time and road point
+/// of its first and last thirds of road points (jitter averages out), and its velocity
+/// between them (m/s).
+#[derive(Debug, Clone, Copy)]
+struct PieceEnds {
+    first_frame: u64,
+    last_frame: u64,
+    start: (f64, [f64; 2]),
+    end: (f64, [f64; 2]),
+    velocity: Option<[f64; 2]>,
+}
+
+fn piece_ends(points: &[TrackPoint]) -> Option<PieceEnds> {
+    let road: Vec<(f64, [f64; 2])> = points
+        .iter()
+        .filter_map(|p| p.road_m.map(|q| (p.time_s, q)))
+        .collect();
+    let n = road.len();
+    if n == 0 {
+        return None;
+    }
+    let third = (n / 3).max(1);
+    let mean = |s: &[(f64, [f64; 2])]| {
+        let k = s.len() as f64;
+        let t = s.iter().map(|p| p.0).sum::<f64>() / k;
+        let x = s.iter().map(|p| p.1[0]).sum::<f64>() / k;
+        let y = s.iter().map(|p| p.1[1]).sum::<f64>() / k;
+        (t, [x, y])
+    };
+    let (start, end) = (mean(&road[..third]), mean(&road[n - third..]));
+    let dt = end.0 - start.0;
+    let velocity = (dt > 0.0).then(|| [(end.1[0] - start.1[0]) / dt, (end.1[1] - start.1[1]) / dt]);
+    Some(PieceEnds {
+        first_frame: points.first()?.frame,
+        last_frame: points.last()?.frame,
+        start,
+        end,
+        velocity: velocity.filter(|v| v[0].hypot(v[1]) > 0.0 && v[0].is_finite()),
+    })
+}
+
+/// How well piece `b` continues piece `a` (smaller is better, at most 2), or `None` when it
+/// does not ([`StitchSettings`]): `a`'s end moved on at its velocity to `b`'s start time, and
+/// `b` not driving the other way.
+fn continuation_cost(a: &PieceEnds, b: &PieceEnds, s: &StitchSettings) -> Option<f64> {
+    if b.first_frame <= a.last_frame {
+        return None;
+    }
+    let v = a.velocity?;
+    if b.velocity.is_some_and(|w| w[0] * v[0] + w[1] * v[1] <= 0.0) {
+        return None;
+    }
+    // Between the two anchors (positive: b starts after a ends).
+    let gap = b.start.0 - a.end.0;
+    if gap.is_nan() || gap <= 0.0 {
+        return None;
+    }
+    let speed = v[0].hypot(v[1]);
+    let u = [v[0] / speed, v[1] / speed];
+    let r = [
+        b.start.1[0] - (a.end.1[0] + v[0] * gap),
+        b.start.1[1] - (a.end.1[1] + v[1] * gap),
+    ];
+    let along = (r[0] * u[0] + r[1] * u[1]).abs();
+    let lateral = (r[0] * u[1] - r[1] * u[0]).abs();
+    let along_tol = s.along_m + s.along_frac * speed * gap;
+    (lateral <= s.max_lateral_m && along <= along_tol)
+        .then(|| along / along_tol + lateral / s.max_lateral_m)
+}
+
+/// Joins the pieces of track that are one vehicle: the tracker cuts a track where a box
+/// changes suddenly (two vehicles' boxes merge or split, a vehicle is missed for a while);
+/// on the road the pieces line up in time and place. Greedy, best continuation first; a piece
+/// continues at most one piece and is continued by at most one. Pieces whose last frame is
+/// after `b`'s first frame are never joined (two vehicles side by side).
+pub fn stitch(pieces: Vec<Vec<TrackPoint>>, settings: &StitchSettings) -> Vec<Vec<TrackPoint>> {
+    let ends: Vec<Option<PieceEnds>> = pieces.iter().map(|p| piece_ends(p)).collect();
+    let mut candidates = Vec::new();
+    for (i, a) in ends.iter().enumerate() {
+        let Some(a) = a else { continue };
+        for (j, b) in ends.iter().enumerate() {
+            let Some(b) = b else { continue };
+            let frames_gap = b.first_frame.saturating_sub(a.last_frame);
+            let seconds_gap = pieces[j][0].time_s - pieces[i][pieces[i].len() - 1].time_s;
+            if i == j || frames_gap == 0 || seconds_gap > settings.max_gap_s {
+                continue;
+            }
+            if let Some(c) = continuation_cost(a, b, settings) {
+                candidates.push((c, i, j));
+            }
+        }
+    }
+    candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let n = pieces.len();
+    let (mut next, mut prev) = (vec![None; n], vec![None; n]);
+    for (_, i, j) in candidates {
+        if next[i].is_some() || prev[j].is_some() {
+            continue;
+        }
+        // No cycles: j must not lead back to i.
+        let mut k = Some(j);
+        while let Some(x) = k {
+            if x == i {
+                break;
+            }
+            k = next[x];
+        }
+        if k == Some(i) {
+            continue;
+        }
+        next[i] = Some(j);
+        prev[j] = Some(i);
+    }
+    let mut slots: Vec<Option<Vec<TrackPoint>>> = pieces.into_iter().map(Some).collect();
+    let mut out = Vec::new();
+    for (start, p) in prev.iter().enumerate() {
+        if p.is_some() {
+            continue;
+        }
+        let mut chain = Vec::new();
+        let mut k = Some(start);
+        while let Some(x) = k {
+            chain.extend(slots[x].take().unwrap_or_default());
+            k = next[x];
+        }
+        out.push(chain);
+    }
+    out
 }
 
 /// Median of `v` (NaN when empty).
@@ -594,6 +769,53 @@ mod tests {
             vp1: Point2::new(0.0, 0.0),
             vp2: Point2::new(0.0, 0.0),
             edgelets: vec![],
+        }
+    }
+
+    /// Track points of a vehicle driving along road x at `v` m/s, from frame `f0` to `f1`
+    /// (exclusive), `y` metres across, starting at x = `x0` at frame 0 (25 frames/s).
+    fn road_piece(f0: u64, f1: u64, x0: f64, y: f64, v: f64) -> Vec<TrackPoint> {
+        (f0..f1)
+            .map(|f| {
+                let t = f as f64 / 25.0;
+                TrackPoint {
+                    frame: f,
+                    time_s: t,
+                    image: Point2::new(0.0, 0.0),
+                    box_px: BoxPx::new(0.0, 0.0, 1.0, 1.0),
+                    clipped: false,
+                    road_m: Some([x0 + v * t, y]),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn pieces_of_one_vehicle_are_stitched_and_neighbours_are_not() {
+        let s = StitchSettings::default();
+        // One vehicle at 30 m/s cut into three pieces (gaps of 5 and 15 frames), a second one
+        // in the next lane (3.5 m over) and a third that starts where the first would be but
+        // drives the other way.
+        let pieces = vec![
+            road_piece(0, 30, 0.0, 0.0, 30.0),
+            road_piece(35, 60, 0.0, 0.2, 30.0),
+            road_piece(75, 100, 0.0, -0.1, 30.0),
+            road_piece(62, 90, 30.0, 3.5, 30.0),
+            road_piece(31, 50, 80.0, 0.0, -30.0),
+        ];
+        let out = stitch(pieces, &s);
+        let lens: Vec<usize> = out.iter().map(Vec::len).collect();
+        assert_eq!(lens, vec![80, 28, 19], "{lens:?}");
+        assert!(out[0].windows(2).all(|w| w[0].frame < w[1].frame));
+        // A gap of more than a second, or a piece 6 m behind where the vehicle would be, stays
+        // apart (3.7 m allowed here); pieces that overlap in time are two vehicles.
+        for b in [
+            road_piece(60, 90, 0.0, 0.0, 30.0),
+            road_piece(35, 60, -6.0, 0.0, 30.0),
+            road_piece(25, 60, 0.0, 0.0, 30.0),
+        ] {
+            let out = stitch(vec![road_piece(0, 30, 0.0, 0.0, 30.0), b], &s);
+            assert_eq!(out.len(), 2);
         }
     }
 
