@@ -376,39 +376,27 @@ pub fn build_tracks(
 
 /// Where a piece of track is at its start and end on the road: the mean time and road point
 /// of its first and last thirds of road points (jitter averages out), and its velocity
-/// between them (m/s).
+/// between them (m/s); the times of its first and last points.
 #[derive(Debug, Clone, Copy)]
 struct PieceEnds {
-    first_frame: u64,
-    last_frame: u64,
-    start: (f64, [f64; 2]),
-    end: (f64, [f64; 2]),
+    first_time: f64,
+    last_time: f64,
+    start: [f64; 3],
+    end: [f64; 3],
     velocity: Option<[f64; 2]>,
 }
 
 fn piece_ends(points: &[TrackPoint]) -> Option<PieceEnds> {
-    let road: Vec<(f64, [f64; 2])> = points
+    let road: Vec<[f64; 3]> = points
         .iter()
-        .filter_map(|p| p.road_m.map(|q| (p.time_s, q)))
+        .filter_map(|p| p.road_m.map(|q| [p.time_s, q[0], q[1]]))
         .collect();
-    let n = road.len();
-    if n == 0 {
-        return None;
-    }
-    let third = (n / 3).max(1);
-    let mean = |s: &[(f64, [f64; 2])]| {
-        let k = s.len() as f64;
-        let t = s.iter().map(|p| p.0).sum::<f64>() / k;
-        let x = s.iter().map(|p| p.1[0]).sum::<f64>() / k;
-        let y = s.iter().map(|p| p.1[1]).sum::<f64>() / k;
-        (t, [x, y])
-    };
-    let (start, end) = (mean(&road[..third]), mean(&road[n - third..]));
-    let dt = end.0 - start.0;
-    let velocity = (dt > 0.0).then(|| [(end.1[0] - start.1[0]) / dt, (end.1[1] - start.1[1]) / dt]);
+    let [start, end] = mean_of_thirds(&road)?;
+    let dt = end[0] - start[0];
+    let velocity = (dt > 0.0).then(|| [(end[1] - start[1]) / dt, (end[2] - start[2]) / dt]);
     Some(PieceEnds {
-        first_frame: points.first()?.frame,
-        last_frame: points.last()?.frame,
+        first_time: points.first()?.time_s,
+        last_time: points.last()?.time_s,
         start,
         end,
         velocity: velocity.filter(|v| v[0].hypot(v[1]) > 0.0 && v[0].is_finite()),
@@ -416,26 +404,24 @@ fn piece_ends(points: &[TrackPoint]) -> Option<PieceEnds> {
 }
 
 /// How well piece `b` continues piece `a` (smaller is better, at most 2), or `None` when it
-/// does not ([`StitchSettings`]): `a`'s end moved on at its velocity to `b`'s start time, and
-/// `b` not driving the other way.
+/// does not ([`StitchSettings`]): `b` starts after `a` ends, within `max_gap_s`, where `a`'s
+/// end moved on at its velocity puts it, and does not drive the other way.
 fn continuation_cost(a: &PieceEnds, b: &PieceEnds, s: &StitchSettings) -> Option<f64> {
-    if b.first_frame <= a.last_frame {
+    let seconds_gap = b.first_time - a.last_time;
+    if seconds_gap <= 0.0 || seconds_gap > s.max_gap_s {
         return None;
     }
     let v = a.velocity?;
     if b.velocity.is_some_and(|w| w[0] * v[0] + w[1] * v[1] <= 0.0) {
         return None;
     }
-    // Between the two anchors (positive: b starts after a ends).
-    let gap = b.start.0 - a.end.0;
-    if gap.is_nan() || gap <= 0.0 {
-        return None;
-    }
+    // From a's end anchor to b's start anchor: positive, as b's points all follow a's.
+    let gap = b.start[0] - a.end[0];
     let speed = v[0].hypot(v[1]);
     let u = [v[0] / speed, v[1] / speed];
     let r = [
-        b.start.1[0] - (a.end.1[0] + v[0] * gap),
-        b.start.1[1] - (a.end.1[1] + v[1] * gap),
+        b.start[1] - (a.end[1] + v[0] * gap),
+        b.start[2] - (a.end[2] + v[1] * gap),
     ];
     let along = (r[0] * u[0] + r[1] * u[1]).abs();
     let lateral = (r[0] * u[1] - r[1] * u[0]).abs();
@@ -447,22 +433,17 @@ fn continuation_cost(a: &PieceEnds, b: &PieceEnds, s: &StitchSettings) -> Option
 /// Joins the pieces of track that are one vehicle: the tracker cuts a track where a box
 /// changes suddenly (two vehicles' boxes merge or split, a vehicle is missed for a while);
 /// on the road the pieces line up in time and place. Greedy, best continuation first; a piece
-/// continues at most one piece and is continued by at most one. Pieces whose last frame is
-/// after `b`'s first frame are never joined (two vehicles side by side).
+/// continues at most one piece and is continued by at most one. Pieces that overlap in time
+/// are never joined (two vehicles side by side), so a chain always runs forward in time.
 pub fn stitch(pieces: Vec<Vec<TrackPoint>>, settings: &StitchSettings) -> Vec<Vec<TrackPoint>> {
     let ends: Vec<Option<PieceEnds>> = pieces.iter().map(|p| piece_ends(p)).collect();
     let mut candidates = Vec::new();
     for (i, a) in ends.iter().enumerate() {
-        let Some(a) = a else { continue };
         for (j, b) in ends.iter().enumerate() {
-            let Some(b) = b else { continue };
-            let frames_gap = b.first_frame.saturating_sub(a.last_frame);
-            let seconds_gap = pieces[j][0].time_s - pieces[i][pieces[i].len() - 1].time_s;
-            if i == j || frames_gap == 0 || seconds_gap > settings.max_gap_s {
-                continue;
-            }
-            if let Some(c) = continuation_cost(a, b, settings) {
-                candidates.push((c, i, j));
+            if let (Some(a), Some(b)) = (a, b) {
+                if let Some(c) = continuation_cost(a, b, settings) {
+                    candidates.push((c, i, j));
+                }
             }
         }
     }
@@ -470,22 +451,10 @@ pub fn stitch(pieces: Vec<Vec<TrackPoint>>, settings: &StitchSettings) -> Vec<Ve
     let n = pieces.len();
     let (mut next, mut prev) = (vec![None; n], vec![None; n]);
     for (_, i, j) in candidates {
-        if next[i].is_some() || prev[j].is_some() {
-            continue;
+        if next[i].is_none() && prev[j].is_none() {
+            next[i] = Some(j);
+            prev[j] = Some(i);
         }
-        // No cycles: j must not lead back to i.
-        let mut k = Some(j);
-        while let Some(x) = k {
-            if x == i {
-                break;
-            }
-            k = next[x];
-        }
-        if k == Some(i) {
-            continue;
-        }
-        next[i] = Some(j);
-        prev[j] = Some(i);
     }
     let mut slots: Vec<Option<Vec<TrackPoint>>> = pieces.into_iter().map(Some).collect();
     let mut out = Vec::new();
@@ -515,6 +484,26 @@ fn slope(x: &[f64], y: &[f64]) -> Option<f64> {
     s.is_finite().then_some(s)
 }
 
+/// The means of the first and of the last third of `v` (at least one element each); `None`
+/// when `v` is empty.
+fn mean_of_thirds<const N: usize>(v: &[[f64; N]]) -> Option<[[f64; N]; 2]> {
+    let n = v.len();
+    if n == 0 {
+        return None;
+    }
+    let third = (n / 3).max(1);
+    let mean = |s: &[[f64; N]]| {
+        let mut m = [0.0; N];
+        for p in s {
+            for (a, x) in m.iter_mut().zip(p) {
+                *a += x;
+            }
+        }
+        m.map(|a| a / s.len() as f64)
+    };
+    Some([mean(&v[..third]), mean(&v[n - third..])])
+}
+
 /// Distances of `pos` along the direction of travel (from the mean of the first third of the
 /// points to the mean of the last third), metres; `None` when the track did not move.
 pub fn along_track(pos: &[[f64; 2]]) -> Option<Vec<f64>> {
@@ -522,15 +511,7 @@ pub fn along_track(pos: &[[f64; 2]]) -> Option<Vec<f64>> {
     if n < 2 {
         return None;
     }
-    let third = (n / 3).max(1);
-    let mean = |s: &[[f64; 2]]| {
-        let k = s.len() as f64;
-        [
-            s.iter().map(|p| p[0]).sum::<f64>() / k,
-            s.iter().map(|p| p[1]).sum::<f64>() / k,
-        ]
-    };
-    let (a, b) = (mean(&pos[..third]), mean(&pos[n - third..]));
+    let [a, b] = mean_of_thirds(pos)?;
     let d = [b[0] - a[0], b[1] - a[1]];
     let len = d[0].hypot(d[1]);
     if !(len > 0.0 && len.is_finite()) {

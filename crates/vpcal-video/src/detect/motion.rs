@@ -468,11 +468,10 @@ impl MotionDetector {
         for b in &blobs {
             slow_update[b.label] = b.is_moving(config.min_moving_frac);
         }
-        let changed: Vec<bool> = dists.iter().map(|&d| d > threshold).collect();
         let boxes: Vec<(Blob, f32)> = select_boxes(blobs, w, h, &config)
             .into_iter()
             .map(|(mut b, score)| {
-                b.y1 = extend_bottom(&b, &changed, w, h, &config);
+                b.y1 = extend_bottom(&b, &dists, threshold, w, h, &config);
                 (b, score)
             })
             .collect();
@@ -690,11 +689,12 @@ fn find_blobs(fg: &GrayImage, moved: &[bool]) -> (Vec<u32>, Vec<Blob>) {
 }
 
 /// The bottom row of blob `b` extended down over the rows just under it in which at least
-/// `bottom_row_frac` of its columns `changed` (differ from the background, shadow or not), by
+/// `bottom_row_frac` of its columns changed (their distance from the background `dists`
+/// exceeds `threshold`, shadow or not; NaN outside the road mask never does), by
 /// at most `bottom_extend_frac` of its height (at least one row): a vehicle's tyres and the
 /// shadow under it are dark copies of the road, which the shadow test removes, and without
 /// them the box ends above where the vehicle meets the road.
-fn extend_bottom(b: &Blob, changed: &[bool], w: u32, h: u32, c: &MotionConfig) -> u32 {
+fn extend_bottom(b: &Blob, dists: &[f32], threshold: f32, w: u32, h: u32, c: &MotionConfig) -> u32 {
     if c.bottom_extend_frac <= 0.0 {
         return b.y1;
     }
@@ -706,7 +706,7 @@ fn extend_bottom(b: &Blob, changed: &[bool], w: u32, h: u32, c: &MotionConfig) -
     for y in b.y1 + 1..=(b.y1 + max_rows).min(h.saturating_sub(1)) {
         let row = (y * w) as usize;
         let n = (b.x0..=b.x1)
-            .filter(|&x| changed.get(row + x as usize).copied().unwrap_or(false))
+            .filter(|&x| dists.get(row + x as usize).is_some_and(|&d| d > threshold))
             .count();
         if (n as f64) < c.bottom_row_frac * columns {
             break;
@@ -860,35 +860,40 @@ mod tests {
         let (w, h) = (40u32, 60u32);
         // A vehicle blob in rows 10-29, columns 5-24: 20 rows tall, so at most 3 rows more.
         let b = blob(5, 10, 24, 29);
-        let mut changed = vec![false; (w * h) as usize];
-        let mark = |changed: &mut Vec<bool>, y: u32, x0: u32, x1: u32| {
+        // Distances from the background: 0 on the road, 50 on changed pixels; threshold 20.
+        let t = 20.0;
+        let mut changed = vec![0f32; (w * h) as usize];
+        let mark = |changed: &mut Vec<f32>, y: u32, x0: u32, x1: u32| {
             for x in x0..=x1 {
-                changed[(y * w + x) as usize] = true;
+                changed[(y * w + x) as usize] = 50.0;
             }
         };
-        assert_eq!(extend_bottom(&b, &changed, w, h, &c), 29);
+        assert_eq!(extend_bottom(&b, &changed, t, w, h, &c), 29);
         // Two tyres (columns 6-9 and 19-22: 8 of 20 columns) in row 30, the shadow under the
         // body in row 31.
         mark(&mut changed, 30, 6, 9);
         mark(&mut changed, 30, 19, 22);
         mark(&mut changed, 31, 7, 22);
-        assert_eq!(extend_bottom(&b, &changed, w, h, &c), 31);
+        assert_eq!(extend_bottom(&b, &changed, t, w, h, &c), 31);
         // A long shadow below: the extension stops after 3 rows.
         for y in 32..50 {
             mark(&mut changed, y, 5, 24);
         }
-        assert_eq!(extend_bottom(&b, &changed, w, h, &c), 32);
+        assert_eq!(extend_bottom(&b, &changed, t, w, h, &c), 32);
         // A few changed pixels (one tyre, 4 of 20 columns) are not a row of the vehicle.
-        let mut sparse = vec![false; (w * h) as usize];
+        let mut sparse = vec![0f32; (w * h) as usize];
         mark(&mut sparse, 30, 6, 9);
-        assert_eq!(extend_bottom(&b, &sparse, w, h, &c), 29);
+        assert_eq!(extend_bottom(&b, &sparse, t, w, h, &c), 29);
         // Off: the blob as it is; at the frame's last row: no further.
         let off = MotionConfig {
             bottom_extend_frac: 0.0,
             ..c.clone()
         };
-        assert_eq!(extend_bottom(&b, &changed, w, h, &off), 29);
-        assert_eq!(extend_bottom(&blob(5, 40, 24, 59), &changed, w, h, &c), 59);
+        assert_eq!(extend_bottom(&b, &changed, t, w, h, &off), 29);
+        assert_eq!(
+            extend_bottom(&blob(5, 40, 24, 59), &changed, t, w, h, &c),
+            59
+        );
     }
 
     #[test]
