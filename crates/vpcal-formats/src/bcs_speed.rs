@@ -531,8 +531,7 @@ pub struct VideoSpeed {
     pub abs_kmh: Option<Summary>,
     /// Relative errors, percent.
     pub rel_pct: Option<Summary>,
-    /// The matched valid cars, in GT order.
-    #[serde(skip)]
+    /// The matched valid cars, in GT order (per-car errors: `measured_kmh - gt_kmh`).
     pub matches: Vec<SpeedMatch>,
 }
 

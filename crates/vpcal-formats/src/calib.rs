@@ -70,6 +70,31 @@ pub struct Horizon {
     pub angle_deg: f64,
 }
 
+/// How road distances measured with an automatic scale move with the focal length: a
+/// distance along the road (what speeds are made of) and one across it (a lane width), with
+/// the camera at each end of the focal length's interval (the same VP1, horizon and principal
+/// point) scaled by its own vehicles, as ratios to their values with the file's camera.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FocalSensitivity {
+    /// The focal lengths compared, pixels: the interval's ends.
+    pub focal_px: [f64; 2],
+    /// Along-road distance ratio at each end.
+    pub along: [f64; 2],
+    /// Across-road distance ratio at each end.
+    pub across: [f64; 2],
+}
+
+impl FocalSensitivity {
+    /// The largest factor by which along-road distances (and speeds) may be off either way,
+    /// e.g. 1.3 for ratios 0.77-1.2.
+    pub fn along_factor(&self) -> f64 {
+        self.along
+            .iter()
+            .map(|r| r.ln().abs().exp())
+            .fold(1.0, f64::max)
+    }
+}
+
 /// The known distance a metric scale came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ScaleReference {
@@ -241,6 +266,10 @@ pub struct CalibrationFile {
     /// the spread of typical car sizes between fleets).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale_interval_m_per_unit: Option<[f64; 2]>,
+    /// With an automatic scale: how the distances it gives move when the focal length moves
+    /// over `focal_interval_px` (each end's camera scaled by its own vehicles).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_focal_sensitivity: Option<FocalSensitivity>,
     /// Height of the camera above the road, metres (with a scale).
     #[serde(default)]
     pub camera_height_m: Option<f64>,
@@ -302,6 +331,7 @@ impl CalibrationFile {
             road_homography: None,
             scale_source: None,
             scale_interval_m_per_unit: None,
+            scale_focal_sensitivity: None,
             opencv: None,
             evidence: None,
             confidence: None,
@@ -376,6 +406,7 @@ impl CalibrationFile {
         self.scale_source = reference.as_ref().map(|_| "distance".to_string());
         self.scale_reference = reference;
         self.scale_interval_m_per_unit = None;
+        self.scale_focal_sensitivity = None;
         self.update_export(&cal);
         Ok(())
     }

@@ -137,10 +137,27 @@ pub fn calibrated_run_file(
             file.summary.as_deref().unwrap_or_default(),
             crate::autoscale::summary_line(&auto, cal.plane_distance())
         ));
+        let sensitivity = agg
+            .focal_interval_px
+            .and_then(|iv| crate::autoscale::focal_sensitivity(out, cal, &auto, iv));
+        file.scale_focal_sensitivity = sensitivity;
+        let focal_part = sensitivity.map_or(String::new(), |s| {
+            format!(
+                "; and as good as the focal length: over its 68% interval ({:.0}-{:.0} px) \
+                 distances along the road (and speeds) change by x{:.2}-x{:.2}, across it by \
+                 x{:.2}-x{:.2}",
+                s.focal_px[0],
+                s.focal_px[1],
+                s.along[0].min(s.along[1]),
+                s.along[0].max(s.along[1]),
+                s.across[0].min(s.across[1]),
+                s.across[0].max(s.across[1])
+            )
+        });
         file.warnings.push(format!(
             "the metric scale is automatic: the vehicles' sizes read as typical {} x {} x {} m \
-             cars (68% {:.4}-{:.4} m per unit, about ±{:.0} %); give a known road distance \
-             (--scale-points/--scale-distance or `vpcal scale`) for measurements",
+             cars (68% {:.4}-{:.4} m per unit, about ±{:.0} %){focal_part}; give a known road \
+             distance (--scale-points/--scale-distance or `vpcal scale`) for measurements",
             vpcal_geom::vehicle_scale::PASSENGER_CAR[0],
             vpcal_geom::vehicle_scale::PASSENGER_CAR[1],
             vpcal_geom::vehicle_scale::PASSENGER_CAR[2],

@@ -737,6 +737,21 @@ fn calibrate_writes_tracks_and_bcs_cars_that_eval_speed_measures() {
     assert!(recall > 0.5, "recall {recall}: {speed}");
     assert!(median.is_finite(), "{speed}");
     eprintln!("eval speed: recall {recall}, median abs error {median} km/h");
+    // Every matched car is listed, with both speeds: the median comes from them.
+    let matches = speed["matches"].as_array().unwrap();
+    assert_eq!(matches.len() as u64, speed["matched"].as_u64().unwrap());
+    let mut errors: Vec<f64> = matches
+        .iter()
+        .map(|m| (m["measured_kmh"].as_f64().unwrap() - m["gt_kmh"].as_f64().unwrap()).abs())
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    let n = errors.len();
+    let mid = if n % 2 == 1 {
+        errors[n / 2]
+    } else {
+        0.5 * (errors[n / 2 - 1] + errors[n / 2])
+    };
+    assert!((mid - median).abs() < 1e-9, "{mid} vs {median}");
     // Without a known distance the scale is automatic, from the vehicles' sizes, and says
     // so. Measured when written: 0.0922 m per unit against the taped distance's 0.0774
     // (+19 %): this camera's focal length is assumed (661 px, truth 471 px) and the cars'
@@ -765,10 +780,25 @@ fn calibrate_writes_tracks_and_bcs_cars_that_eval_speed_measures() {
     assert_eq!(auto["scale_source"], "vehicles");
     let s = auto["scale_m_per_unit"].as_f64().unwrap();
     let known = sys["camera_calibration"]["scale"].as_f64().unwrap();
+    eprintln!("automatic scale {s} m per unit, taped {known}");
     assert!((s / known).ln().abs() < 0.3, "{s} vs {known}");
     let [lo, hi] = [0, 1].map(|i| auto["scale_interval_m_per_unit"][i].as_f64().unwrap());
     assert!(lo < s && s < hi, "{lo}-{hi}");
     assert!(auto["road_homography"].is_array());
+    // How the distances move over the focal length's interval: along the road they grow
+    // with the focal length (less foreshortening), and the warning says so.
+    let sens = &auto["scale_focal_sensitivity"];
+    let ratio = |k: &str, i: usize| sens[k][i].as_f64().unwrap();
+    assert!(ratio("along", 0) < 1.0 && ratio("along", 1) > 1.0, "{sens}");
+    assert_eq!(
+        sens["focal_px"][0].as_f64(),
+        auto["focal_interval_px"][0].as_f64()
+    );
+    assert!(
+        text(&r).contains("distances along the road"),
+        "{}",
+        text(&r)
+    );
 }
 
 /// A scene without speed ground truth (a curve: no measurement lines) is skipped, with the
