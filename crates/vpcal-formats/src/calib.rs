@@ -84,17 +84,6 @@ pub struct FocalSensitivity {
     pub across: [f64; 2],
 }
 
-impl FocalSensitivity {
-    /// The largest factor by which along-road distances (and speeds) may be off either way,
-    /// e.g. 1.3 for ratios 0.77-1.2.
-    pub fn along_factor(&self) -> f64 {
-        self.along
-            .iter()
-            .map(|r| r.ln().abs().exp())
-            .fold(1.0, f64::max)
-    }
-}
-
 /// The known distance a metric scale came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ScaleReference {

@@ -15,6 +15,11 @@ pub const SOURCE: &str = "vehicles";
 /// box tracker) counted once; `None` with too few vehicles whose boxes fit a car-shaped
 /// cuboid.
 pub fn vehicle_scale(out: &PipelineOutput, cal: &Calibration, seed: u64) -> Option<VehicleScale> {
+    scale_of(out, &sized_boxes(out), cal, seed)
+}
+
+/// The records' detector boxes, each with its track of the box tracker as its group.
+fn sized_boxes(out: &PipelineOutput) -> Vec<SizedBox> {
     let link = crate::tracks::TrackSettings::default().link;
     let tracks = crate::tracks::link_boxes(&crate::tracks::record_boxes(&out.records), &link);
     let mut group = vec![0u64; out.records.len()];
@@ -23,8 +28,7 @@ pub fn vehicle_scale(out: &PipelineOutput, cal: &Calibration, seed: u64) -> Opti
             group[i] = t as u64;
         }
     }
-    let boxes: Vec<SizedBox> = out
-        .records
+    out.records
         .iter()
         .zip(&group)
         .map(|(r, g)| SizedBox {
@@ -32,10 +36,19 @@ pub fn vehicle_scale(out: &PipelineOutput, cal: &Calibration, seed: u64) -> Opti
             heading: None,
             group: Some(*g),
         })
-        .collect();
+        .collect()
+}
+
+/// [`vehicle_scale`] with the boxes already grouped.
+fn scale_of(
+    out: &PipelineOutput,
+    boxes: &[SizedBox],
+    cal: &Calibration,
+    seed: u64,
+) -> Option<VehicleScale> {
     scale_from_vehicles(
         cal,
-        &boxes,
+        boxes,
         f64::from(out.info.width),
         f64::from(out.info.height),
         PASSENGER_CAR,
@@ -79,10 +92,10 @@ pub fn focal_sensitivity(
     scale: &VehicleScale,
     interval_px: [f64; 2],
 ) -> Option<FocalSensitivity> {
-    let feet: Vec<(f64, f64)> = out
-        .records
+    let boxes = sized_boxes(out);
+    let feet: Vec<(f64, f64)> = boxes
         .iter()
-        .map(|r| (0.5 * (r.det_box.x0 + r.det_box.x1), r.det_box.y1))
+        .map(|b| (0.5 * (b.bbox.x0 + b.bbox.x1), b.bbox.y1))
         .collect();
     let median = |v: Vec<f64>| vpcal_geom::solve::median(&v);
     let foot = Point2::new(
@@ -113,7 +126,7 @@ pub fn focal_sensitivity(
     let mut across = [1.0; 2];
     for (k, &f) in interval_px.iter().enumerate() {
         let c = with_focal(cal, f)?;
-        let s = vehicle_scale(out, &c, 0)?;
+        let s = scale_of(out, &boxes, &c, 0)?;
         let (a, b) = metres(&c, s.m_per_unit)?;
         along[k] = a / base.0;
         across[k] = b / base.1;
