@@ -14,7 +14,15 @@
 //!    the road is added to the background: exposure and white-balance drift is not motion.
 //! 3. **Shadows.** A foreground pixel that is a darker copy of the background (brightness ratio
 //!    `a = I·B / B·B` in `shadow_brightness` and colour distortion `|I − aB| / |aB|` below
-//!    `shadow_chroma`) is a cast shadow, not a vehicle (Horprasert et al., 1999).
+//!    `shadow_chroma`) is a cast shadow, not a vehicle (Horprasert et al., 1999). But a dark
+//!    grey vehicle on grey asphalt is a darker copy of the road too. A cast shadow lies beside
+//!    the vehicle that casts it, so a region of changed pixels (shadow-like or not, after the
+//!    same opening and closing) of vehicle size (at least `DARK_MIN_AREAS` smallest boxes) in
+//!    which less than `dark_vehicle_share` of the pixels pass as non-shadow is a dark vehicle
+//!    and joins the foreground whole. On the overcast highway clip `bgslibrary_video02` this
+//!    finds 48 % of the COCO detector's boxes at IoU > 0.5 instead of 22 % (motion boxes that
+//!    match one: 39 % instead of 23 %); the CDnet highway and the residential street stay as
+//!    they were (0.51 / 0.58 and 0.14 / 0.32 against 0.50 / 0.57 and 0.14 / 0.31).
 //! 4. **Mask and morphology.** Pixels outside the optional road mask are dropped; an opening
 //!    removes speckle, a closing fills holes (windows, dark paint) and joins fragments.
 //! 5. **Blobs.** 8-connected components; boxes closer than `merge_gap_frac` of the width are
@@ -46,8 +54,9 @@
 //! score low.
 //!
 //! Known limits: vehicles that touch in the image merge into one box; vehicles that stop for
-//! long are absorbed into the background; grey vehicles on a grey road can be taken for
-//! shadows in part; it needs a fixed camera.
+//! long are absorbed into the background; a dark vehicle with a large bright part (windows,
+//! a light roof) can lose its dark part to the shadow test, and a dark vehicle joined to its
+//! own cast shadow gets a box that covers the shadow; it needs a fixed camera.
 
 use fast_image_resize as fir;
 use image::{GrayImage, Luma, RgbImage};
@@ -85,6 +94,11 @@ pub struct MotionConfig {
     pub shadow_brightness: (f32, f32),
     /// Largest relative colour distortion of a shadow.
     pub shadow_chroma: f32,
+    /// A region of changed pixels (shadow-like or not, after the same opening and closing)
+    /// in which fewer than this share of the pixels pass as non-shadow is a dark vehicle, not
+    /// a shadow: a cast shadow lies beside the vehicle that casts it (module docs, step 3;
+    /// 0 turns it off).
+    pub dark_vehicle_share: f64,
     /// Opening radius (working pixels, square element).
     pub open_radius: u8,
     /// Closing radius (working pixels, square element).
@@ -131,6 +145,7 @@ impl Default for MotionConfig {
             shadow_suppression: true,
             shadow_brightness: (0.35, 0.92),
             shadow_chroma: 0.12,
+            dark_vehicle_share: 0.25,
             open_radius: 1,
             close_radius: 2,
             merge_gap_frac: 0.008,
@@ -147,6 +162,11 @@ impl Default for MotionConfig {
         }
     }
 }
+
+/// A dark region is taken for a vehicle only when it covers at least this many times the
+/// smallest box area (`min_area_frac`): small shadow-like changes (poles, foliage, noise) are
+/// not vehicles.
+const DARK_MIN_AREAS: f64 = 4.0;
 
 /// Background brightness (RGB norm) below which the shadow test is not attempted.
 const SHADOW_MIN_BACKGROUND: f32 = 30.0;
@@ -406,20 +426,23 @@ impl MotionDetector {
         let noise = median(&mut road_d);
         let threshold = config.min_difference.max(config.noise_factor * noise);
         let mut fg = GrayImage::new(w, h);
+        let mut changed = GrayImage::new(w, h);
         let mut fg_count = 0usize;
         {
             let fgbuf: &mut [u8] = &mut fg;
+            let chbuf: &mut [u8] = &mut changed;
             for (i, &d) in dists.iter().enumerate() {
                 // NaN (outside the mask) compares false.
-                if d > threshold
-                    && !is_shadow(
+                if d > threshold {
+                    chbuf[i] = 255;
+                    if !is_shadow(
                         &self.work[3 * i..3 * i + 3],
                         &model.bg[3 * i..3 * i + 3],
                         &config,
-                    )
-                {
-                    fgbuf[i] = 255;
-                    fg_count += 1;
+                    ) {
+                        fgbuf[i] = 255;
+                        fg_count += 1;
+                    }
                 }
             }
         }
@@ -457,6 +480,22 @@ impl MotionDetector {
                     if !road {
                         *v = 0;
                     }
+                }
+            }
+        }
+        if config.shadow_suppression && config.dark_vehicle_share > 0.0 {
+            if config.open_radius > 0 {
+                imageproc::morphology::open_mut(&mut changed, Norm::LInf, config.open_radius);
+            }
+            if config.close_radius > 0 {
+                imageproc::morphology::close_mut(&mut changed, Norm::LInf, config.close_radius);
+            }
+            let min_pixels = DARK_MIN_AREAS * config.min_area_frac * f64::from(w) * f64::from(h);
+            let dark = dark_regions(&changed, &fg, config.dark_vehicle_share, min_pixels);
+            let mask = model.mask.as_deref();
+            for (i, v) in fg.iter_mut().enumerate() {
+                if dark[i] && mask.is_none_or(|m| m[i]) {
+                    *v = 255;
                 }
             }
         }
@@ -581,6 +620,31 @@ fn is_shadow(px: &[u8], bg: &[f32], c: &MotionConfig) -> bool {
     let e2 = p[2] - a * bg[2];
     let distortion = (e0 * e0 + e1 * e1 + e2 * e2).sqrt() / (a * bb.sqrt()).max(1.0);
     distortion < c.shadow_chroma
+}
+
+/// Pixels of the regions of `changed` (8-connected) in which less than `share` of the pixels
+/// are set in `fg` (the non-shadow foreground): dark vehicles that the shadow test took for
+/// shadows. A cast shadow touches the brighter vehicle that casts it, so its region keeps a
+/// large non-shadow part.
+fn dark_regions(changed: &GrayImage, fg: &GrayImage, share: f64, min_pixels: f64) -> Vec<bool> {
+    let labels = connected_components(changed, Connectivity::Eight, Luma([0u8]));
+    let n_labels = labels.iter().map(|&l| l as usize).max().unwrap_or(0) + 1;
+    let mut total = vec![0usize; n_labels];
+    let mut solid = vec![0usize; n_labels];
+    for (l, f) in labels.iter().zip(fg.iter()) {
+        let l = *l as usize;
+        total[l] += 1;
+        if *f > 0 {
+            solid[l] += 1;
+        }
+    }
+    // Why: pixel counts, exact in f64.
+    let dark: Vec<bool> = (0..n_labels)
+        .map(|l| {
+            l > 0 && total[l] as f64 >= min_pixels && (solid[l] as f64) < share * total[l] as f64
+        })
+        .collect();
+    labels.iter().map(|&l| dark[l as usize]).collect()
 }
 
 /// `slow[i]`: pixel `i` belongs to a moving blob and is updated at the foreground rate.
@@ -894,6 +958,42 @@ mod tests {
             extend_bottom(&blob(5, 40, 24, 59), &changed, t, w, h, &c),
             59
         );
+    }
+
+    #[test]
+    fn dark_regions_are_changed_regions_with_little_non_shadow_foreground() {
+        let (w, h) = (40u32, 20u32);
+        let mut changed = GrayImage::new(w, h);
+        let mut fg = GrayImage::new(w, h);
+        let fill = |img: &mut GrayImage, x0: u32, x1: u32, y0: u32, y1: u32| {
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    img.put_pixel(x, y, Luma([255]));
+                }
+            }
+        };
+        // A bright vehicle (columns 2-9) with its cast shadow beside it (10-15): one region,
+        // most of it non-shadow foreground.
+        fill(&mut changed, 2, 15, 2, 9);
+        fill(&mut fg, 2, 9, 2, 9);
+        // A dark vehicle (22-33) whose only non-shadow pixels are two lights.
+        fill(&mut changed, 22, 33, 2, 9);
+        fg.put_pixel(22, 8, Luma([255]));
+        fg.put_pixel(33, 8, Luma([255]));
+        // A small shadow-like speck (36-37).
+        fill(&mut changed, 36, 37, 14, 16);
+        let at = |v: &[bool], x: u32, y: u32| v[(y * w + x) as usize];
+        let dark = dark_regions(&changed, &fg, 0.25, 20.0);
+        assert!(
+            !at(&dark, 5, 5) && !at(&dark, 12, 5),
+            "the shadow stays a shadow"
+        );
+        assert!(at(&dark, 22, 2) && at(&dark, 28, 5) && at(&dark, 33, 9));
+        assert!(!at(&dark, 36, 15), "a speck is not a vehicle");
+        assert!(!at(&dark, 0, 0) && !at(&dark, 18, 5), "unchanged pixels");
+        // A lower share or a larger minimum size keeps the dark vehicle a shadow.
+        assert!(!dark_regions(&changed, &fg, 0.01, 20.0)[(5 * w + 28) as usize]);
+        assert!(!dark_regions(&changed, &fg, 0.25, 200.0)[(5 * w + 28) as usize]);
     }
 
     #[test]
