@@ -622,8 +622,9 @@ fn is_shadow(px: &[u8], bg: &[f32], c: &MotionConfig) -> bool {
     distortion < c.shadow_chroma
 }
 
-/// Pixels of the regions of `changed` (8-connected) in which less than `share` of the pixels
-/// are set in `fg` (the non-shadow foreground): dark vehicles that the shadow test took for
+/// Pixels of the regions of `changed` (8-connected, at least `min_pixels`) in which less than
+/// `share` of the pixels are set in `fg` (the non-shadow foreground after its opening and
+/// closing): dark vehicles that the shadow test took for
 /// shadows. A cast shadow touches the brighter vehicle that casts it, so its region keeps a
 /// large non-shadow part.
 fn dark_regions(changed: &GrayImage, fg: &GrayImage, share: f64, min_pixels: f64) -> Vec<bool> {
