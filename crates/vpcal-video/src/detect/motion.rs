@@ -476,32 +476,13 @@ impl MotionDetector {
                 .collect(),
             None => vec![true; n],
         };
-        if config.open_radius > 0 {
-            imageproc::morphology::open_mut(&mut fg, Norm::LInf, config.open_radius);
-        }
-        if config.close_radius > 0 {
-            imageproc::morphology::close_mut(&mut fg, Norm::LInf, config.close_radius);
-            // The closing may grow blobs into the masked-out area; cut them back.
-            if let Some(m) = &model.mask {
-                for (v, &road) in fg.iter_mut().zip(m.iter()) {
-                    if !road {
-                        *v = 0;
-                    }
-                }
-            }
-        }
+        clean_mask(&mut fg, &config, model.mask.as_deref());
         if config.shadow_suppression && config.dark_vehicle_share > 0.0 {
-            if config.open_radius > 0 {
-                imageproc::morphology::open_mut(&mut changed, Norm::LInf, config.open_radius);
-            }
-            if config.close_radius > 0 {
-                imageproc::morphology::close_mut(&mut changed, Norm::LInf, config.close_radius);
-            }
+            clean_mask(&mut changed, &config, model.mask.as_deref());
             let min_pixels = DARK_MIN_AREAS * config.min_area_frac * f64::from(w) * f64::from(h);
             let dark = dark_regions(&changed, &fg, config.dark_vehicle_share, min_pixels);
-            let mask = model.mask.as_deref();
-            for (i, v) in fg.iter_mut().enumerate() {
-                if dark[i] && mask.is_none_or(|m| m[i]) {
+            for (v, d) in fg.iter_mut().zip(dark) {
+                if d {
                     *v = 255;
                 }
             }
@@ -629,6 +610,24 @@ fn is_shadow(px: &[u8], bg: &[f32], c: &MotionConfig) -> bool {
     distortion < c.shadow_chroma
 }
 
+/// Step 4's opening and closing of a binary mask; pixels the closing grew into the
+/// masked-out area (`mask[i]` false) are cut back.
+fn clean_mask(img: &mut GrayImage, c: &MotionConfig, mask: Option<&[bool]>) {
+    if c.open_radius > 0 {
+        imageproc::morphology::open_mut(img, Norm::LInf, c.open_radius);
+    }
+    if c.close_radius > 0 {
+        imageproc::morphology::close_mut(img, Norm::LInf, c.close_radius);
+        if let Some(m) = mask {
+            for (v, &road) in img.iter_mut().zip(m) {
+                if !road {
+                    *v = 0;
+                }
+            }
+        }
+    }
+}
+
 /// Pixels of the regions of `changed` (8-connected, at least `min_pixels`, at most
 /// [`DARK_MAX_ASPECT`] times as wide as tall) in which less than
 /// `share` of the pixels are set in `fg` (the non-shadow foreground after its opening and
@@ -636,38 +635,22 @@ fn is_shadow(px: &[u8], bg: &[f32], c: &MotionConfig) -> bool {
 /// shadows. A cast shadow touches the brighter vehicle that casts it, so its region keeps a
 /// large non-shadow part.
 fn dark_regions(changed: &GrayImage, fg: &GrayImage, share: f64, min_pixels: f64) -> Vec<bool> {
-    let labels = connected_components(changed, Connectivity::Eight, Luma([0u8]));
-    let n_labels = labels.iter().map(|&l| l as usize).max().unwrap_or(0) + 1;
-    let w = changed.width() as usize;
-    let mut total = vec![0usize; n_labels];
-    let mut solid = vec![0usize; n_labels];
-    // Per region: x0, y0, x1, y1 (inclusive).
-    let mut extent = vec![[usize::MAX, usize::MAX, 0, 0]; n_labels];
-    for (i, (l, f)) in labels.iter().zip(fg.iter()).enumerate() {
-        let l = *l as usize;
-        total[l] += 1;
-        if *f > 0 {
-            solid[l] += 1;
-        }
-        let (x, y) = (i % w, i / w);
-        let e = &mut extent[l];
-        *e = [e[0].min(x), e[1].min(y), e[2].max(x), e[3].max(y)];
+    // `find_blobs` counts in `moving` the pixels its second argument flags: here the
+    // non-shadow ones.
+    let solid: Vec<bool> = fg.iter().map(|&v| v > 0).collect();
+    let (labels, regions) = find_blobs(changed, &solid);
+    let mut dark = vec![false; regions.iter().map(|r| r.label + 1).max().unwrap_or(0)];
+    for r in &regions {
+        let (rw, rh) = (f64::from(r.x1 - r.x0 + 1), f64::from(r.y1 - r.y0 + 1));
+        // Why: pixel counts, exact in f64.
+        dark[r.label] = r.count as f64 >= min_pixels
+            && (r.moving as f64) < share * r.count as f64
+            && rw <= DARK_MAX_ASPECT * rh;
     }
-    // Why: pixel counts, exact in f64.
-    let dark: Vec<bool> = (0..n_labels)
-        .map(|l| {
-            let e = extent[l];
-            let (rw, rh) = (
-                (e[2] + 1).saturating_sub(e[0]) as f64,
-                (e[3] + 1).saturating_sub(e[1]) as f64,
-            );
-            l > 0
-                && total[l] as f64 >= min_pixels
-                && (solid[l] as f64) < share * total[l] as f64
-                && rw <= DARK_MAX_ASPECT * rh
-        })
-        .collect();
-    labels.iter().map(|&l| dark[l as usize]).collect()
+    labels
+        .iter()
+        .map(|&l| dark.get(l as usize).copied().unwrap_or(false))
+        .collect()
 }
 
 /// `slow[i]`: pixel `i` belongs to a moving blob and is updated at the foreground rate.
