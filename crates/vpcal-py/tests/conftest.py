@@ -18,6 +18,7 @@ ROOT = Path(__file__).resolve().parents[3]
 SCENE_ARGS = [
     "--layout", "highway", "--frames", "40", "--width", "320", "--height", "240",
     "--focal", "330", "--yaw", "-30", "--pitch", "20", "--cam-height", "10", "--roll", "1",
+    "--supersample", "1",
 ]
 
 

@@ -224,6 +224,8 @@ fn folder_of_one_still(dir: &Path, copies: usize) -> std::path::PathBuf {
     let r = vpcal(&[
         "synth",
         "scene",
+        "--supersample",
+        "1",
         "--layout",
         "highway",
         "--frames",
@@ -625,6 +627,8 @@ fn calibrate_writes_tracks_and_bcs_cars_that_eval_speed_measures() {
     let r = vpcal(&[
         "synth",
         "scene",
+        "--supersample",
+        "1",
         "--layout",
         "highway",
         "--frames",
@@ -810,6 +814,8 @@ fn eval_speed_skips_scenes_without_measurement_lines() {
     let r = vpcal(&[
         "synth",
         "scene",
+        "--supersample",
+        "1",
         "--layout",
         "curve",
         "--frames",
