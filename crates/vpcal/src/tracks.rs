@@ -28,7 +28,8 @@
 //!   road (as in DubskaCalib's BrnoCompSpeed files). A box that touches the image border
 //!   ([`TrackSettings::border_px`]) is cut off, so its bottom centre is not the contact point:
 //!   such points stay in the track (flagged `clipped`) but get no road point, no speed
-//!   contribution and are left out of the BrnoCompSpeed `cars`.
+//!   contribution and are left out of the BrnoCompSpeed `cars`, which also leave out tracks
+//!   of fewer unclipped points than a speed window (`output::write_bcs_system_with_tracks`).
 //! - **Road points**: [`Calibration::road_point`] (road frame: x along VP1, y across, origin
 //!   under the camera) times the scale (metres per road unit). Without a scale, tracks have
 //!   image points and times only.

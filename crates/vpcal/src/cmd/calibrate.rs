@@ -439,7 +439,13 @@ pub fn run(args: Args) -> Result<Exit> {
                     output::write_tracks(path, &header, &tracks)?;
                 }
                 if let Some(path) = &args.bcs_json {
-                    output::write_bcs_system_with_tracks(path, &cal, scale, &tracks)?;
+                    output::write_bcs_system_with_tracks(
+                        path,
+                        &cal,
+                        scale,
+                        &tracks,
+                        header.window_points,
+                    )?;
                 }
                 say(output::tracks_line(&tracks, &header));
             }

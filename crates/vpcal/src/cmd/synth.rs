@@ -112,7 +112,7 @@ pub struct SceneArgs {
     pub yaw: Option<f64>,
     /// Samples per pixel along each axis: 3 (default) integrates over the pixel area as a
     /// camera sensor does; 1 is point sampling, whose pixel staircases pull nearly horizontal
-    /// edges towards 0° (on the speed scenes the edgelets' roll then came out 0.4-1.2° flat).
+    /// edges towards 0° (on the speed scenes the edgelets' roll then came out 0.5-1.4° flat).
     #[arg(long, default_value_t = 3)]
     pub supersample: u32,
     #[command(flatten)]
