@@ -13,8 +13,7 @@ camera; the true VP1 with vpcal's roll and focal length; vpcal's VP1 and roll wi
 focal length; vpcal's VP1 and focal length with the true roll) and prints vpcal's and the true
 focal length, roll and VP1 per scene. Then, per variant:
   vpcal eval speed --dataset OUT/dataset --results OUT/results --image-size WxH --system NAME
-The road plane is BrnoCompSpeed's (eval.py's): f from the VPs and the principal point, the plane
-normal from VP1 x VP2, offset 10. Needs numpy.
+The road plane is BrnoCompSpeed's, from `scripts/bcs_ratio_errors.py`. Needs numpy.
 """
 import json
 import math
@@ -23,21 +22,7 @@ import sys
 
 import numpy as np
 
-
-def camera(vp1, vp2, pp):
-    """(f, road plane, pp) of two orthogonal VPs, as BrnoCompSpeed computes them."""
-    vp1, vp2, pp = (np.asarray(v, float) for v in (vp1, vp2, pp))
-    f = math.sqrt(-np.dot(vp1 - pp, vp2 - pp))
-    n = np.cross(np.r_[vp1 - pp, f], np.r_[vp2 - pp, f])
-    return f, np.r_[n / np.linalg.norm(n), 10.0], pp
-
-
-def road_point(p, cam):
-    f, plane, pp = cam
-    ray = np.r_[p[0] - pp[0], p[1] - pp[1], f]
-    origin = np.r_[pp, 0.0]
-    t = -np.dot(plane, np.r_[origin, 1.0]) / np.dot(plane[:3], ray)
-    return origin + t * ray
+from bcs_ratio_errors import camera, road_point
 
 
 def vps_for(vp1, roll_deg, f, pp):
@@ -78,8 +63,9 @@ def main():
         }
         taped = gt["distanceMeasurement"][0]
         for variant, (vp1, vp2) in variants.items():
-            cam = camera(vp1, vp2, pp)
-            units = np.linalg.norm(road_point(taped["p1"], cam) - road_point(taped["p2"], cam))
+            focal, normal = camera(vp1, vp2, pp)
+            ends = [road_point(taped[k], pp, focal, normal) for k in ("p1", "p2")]
+            units = np.linalg.norm(ends[0] - ends[1])
             calib = {"pp": pp, "scale": taped["distance"] / units,
                      "vp1": [float(v) for v in vp1], "vp2": [float(v) for v in vp2]}
             with open(os.path.join(out, "results", name, f"system_{variant}.json"), "w") as fh:
