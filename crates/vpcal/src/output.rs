@@ -291,14 +291,18 @@ pub fn failure_file(
 /// # Errors
 /// The file cannot be written.
 pub fn write_bcs_system(path: &Path, cal: &Calibration, scale: Option<f64>) -> Result<()> {
-    let system = SystemFile::new(SystemCalibration {
+    write_system(path, &bcs_system(cal, scale))?;
+    Ok(())
+}
+
+/// The BrnoCompSpeed system file of `cal` (scale 1 without a metric scale), without cars.
+fn bcs_system(cal: &Calibration, scale: Option<f64>) -> SystemFile {
+    SystemFile::new(SystemCalibration {
         vp1: cal.vp1,
         vp2: cal.vp2,
         pp: cal.pp,
         scale: scale.unwrap_or(1.0),
-    });
-    write_system(path, &system)?;
-    Ok(())
+    })
 }
 
 /// Write `cal` as a BrnoCompSpeed system file with `tracks` as its `cars` (the unclipped
@@ -318,12 +322,7 @@ pub fn write_bcs_system_with_tracks(
     tracks: &[VehicleTrack],
     min_points: usize,
 ) -> Result<()> {
-    let mut system = SystemFile::new(SystemCalibration {
-        vp1: cal.vp1,
-        vp2: cal.vp2,
-        pp: cal.pp,
-        scale: scale.unwrap_or(1.0),
-    });
+    let mut system = bcs_system(cal, scale);
     system.cars = bcs_cars(tracks, min_points);
     write_system(path, &system)?;
     Ok(())

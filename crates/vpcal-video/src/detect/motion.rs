@@ -674,11 +674,12 @@ fn dark_regions(
     let solid: Vec<bool> = fg.iter().map(|&v| v > 0).collect();
     let (labels, regions) = find_blobs(changed, &solid);
     let n_labels = regions.iter().map(|r| r.label + 1).max().unwrap_or(0);
-    // Per region, its pixels that were dark-vehicle pixels in the previous frame.
+    // Per label, its pixels that were dark-vehicle pixels in the previous frame (label 0,
+    // unchanged pixels, is no region and never read).
     let mut was_dark = vec![0u64; n_labels];
     if let Some(prev) = prev_dark {
         for (&l, &d) in labels.iter().zip(prev) {
-            if d && l > 0 {
+            if d {
                 if let Some(c) = was_dark.get_mut(l as usize) {
                     *c += 1;
                 }
@@ -1017,18 +1018,20 @@ mod tests {
         );
     }
 
+    /// Sets columns `x0..=x1` of rows `y0..=y1`.
+    fn fill(img: &mut GrayImage, x0: u32, x1: u32, y0: u32, y1: u32) {
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                img.put_pixel(x, y, Luma([255]));
+            }
+        }
+    }
+
     #[test]
     fn dark_regions_are_changed_regions_with_little_non_shadow_foreground() {
         let (w, h) = (40u32, 20u32);
         let mut changed = GrayImage::new(w, h);
         let mut fg = GrayImage::new(w, h);
-        let fill = |img: &mut GrayImage, x0: u32, x1: u32, y0: u32, y1: u32| {
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    img.put_pixel(x, y, Luma([255]));
-                }
-            }
-        };
         // A bright vehicle (columns 2-9) with its cast shadow beside it (10-15): one region,
         // most of it non-shadow foreground.
         fill(&mut changed, 2, 15, 2, 9);
@@ -1063,11 +1066,7 @@ mod tests {
         let mut fg = GrayImage::new(w, h);
         // A dark vehicle (columns 10-21, rows 4-11: 96 pixels) with 30 bright ones (31 %):
         // above the share of 0.25, below twice it.
-        for y in 4..=11 {
-            for x in 10..=21 {
-                changed.put_pixel(x, y, Luma([255]));
-            }
-        }
+        fill(&mut changed, 10, 21, 4, 11);
         for i in 0..30u32 {
             fg.put_pixel(10 + i % 12, 4 + i / 12, Luma([255]));
         }
