@@ -23,6 +23,8 @@ import sys
 
 import numpy as np
 
+from track_sizes import iou
+
 DATA = os.environ.get("VPCAL_DATA", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
 TS = [0.0, 0.25, 0.5, 0.75, 1.0]
 W, H = 1920, 1080
@@ -30,14 +32,6 @@ PP = np.array([960.5, 540.5])
 MAX_GAP = 30  # frames between a track's boxes
 MIN_BOXES = 6
 MIN_MOVE_PX = 60
-
-
-def iou(a, b):
-    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
-    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
-    inter = ix * iy
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
-    return inter / union if union > 0 else 0.0
 
 
 def link(detections, min_score):
