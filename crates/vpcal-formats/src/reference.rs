@@ -262,6 +262,66 @@ pub fn write_vpout(path: &Path, items: &[VpOutItem]) -> Result<(), FormatError> 
     )
 }
 
+/// Format tag of the scene-edgelets file that `vpcal calibrate --scene-edgelets` writes beside
+/// the per-vehicle records: the edgelets of the scene's background, which move VP1 to where the
+/// lines along the road meet, so that `vpcal aggregate --scene-edgelets` finds the same camera.
+pub const SCENE_EDGELETS_FORMAT: &str = "vpcal-scene-edgelets/1";
+
+/// Write the scene's edgelets (`{"format", "edgelets": [[x, y, angle, strength], ...]}`, frame
+/// pixels and radians) atomically.
+///
+/// # Errors
+/// [`FormatError::Io`] naming the file.
+pub fn write_scene_edgelets(path: &Path, edgelets: &[Edgelet]) -> Result<(), FormatError> {
+    let rows = edgelets
+        .iter()
+        .map(|e| Json::from(&[e.x, e.y, e.angle, e.strength][..]))
+        .collect();
+    write_json(
+        path,
+        &Json::Object(vec![
+            ("format".into(), Json::String(SCENE_EDGELETS_FORMAT.into())),
+            ("edgelets".into(), Json::Array(rows)),
+        ]),
+    )
+}
+
+/// Read a file [`write_scene_edgelets`] wrote.
+///
+/// # Errors
+/// [`FormatError`] naming the file and, for a malformed one, the field.
+pub fn read_scene_edgelets(path: &Path) -> Result<Vec<Edgelet>, FormatError> {
+    let doc = read_json(path)?;
+    let format = doc
+        .field("$", "format")
+        .and_then(|f| f.as_str("$.format"))
+        .map_err(|e| FormatError::field(path, e))?;
+    if format != SCENE_EDGELETS_FORMAT {
+        return Err(FormatError::invalid(
+            path,
+            format!("format `{format}`: expected `{SCENE_EDGELETS_FORMAT}`"),
+        ));
+    }
+    let rows = doc
+        .field("$", "edgelets")
+        .and_then(|r| r.as_array("$.edgelets"))
+        .map_err(|e| FormatError::field(path, e))?;
+    rows.iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let [x, y, angle, strength] = r
+                .as_f64_array::<4>(&format!("$.edgelets[{i}]"))
+                .map_err(|e| FormatError::field(path, e))?;
+            Ok(Edgelet {
+                x,
+                y,
+                angle,
+                strength,
+            })
+        })
+        .collect()
+}
+
 /// The frame size `(width, height)` the items' boxes were measured in, from each box in
 /// both forms (normalised `box` and pixel `vp_box`): the reference truncates
 /// (`x_min = int(W·xmin)`, `x_max = int(W·xmax + 1)`), vpcal writes exact quotients; each box
@@ -391,6 +451,43 @@ pub fn read_detections(path: &Path) -> Result<Vec<ReferenceDetections>, FormatEr
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scene_edgelets_survive_the_file_and_a_wrong_file_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.json");
+        let e = vec![
+            Edgelet {
+                x: 1.25,
+                y: 2.5,
+                angle: -0.125,
+                strength: 30.0,
+            },
+            Edgelet {
+                x: 640.0,
+                y: 0.5,
+                angle: 3.0,
+                strength: 8.5,
+            },
+        ];
+        write_scene_edgelets(&path, &e).unwrap();
+        assert_eq!(read_scene_edgelets(&path).unwrap(), e);
+        write_scene_edgelets(&path, &[]).unwrap();
+        assert!(read_scene_edgelets(&path).unwrap().is_empty());
+        std::fs::write(&path, r#"{"format": "vpcal-tracks/1", "edgelets": []}"#).unwrap();
+        let err = read_scene_edgelets(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("scene.json") && err.contains("vpcal-scene-edgelets/1"),
+            "{err}"
+        );
+        std::fs::write(
+            &path,
+            r#"{"format": "vpcal-scene-edgelets/1", "edgelets": [[1, 2, 3]]}"#,
+        )
+        .unwrap();
+        let err = read_scene_edgelets(&path).unwrap_err().to_string();
+        assert!(err.contains("edgelets[0]"), "{err}");
+    }
 
     fn item(box_norm: [f64; 4], vp_box: [f64; 4]) -> VpOutItem {
         VpOutItem {

@@ -448,7 +448,7 @@ fn aggregate(
         Some(text) => parse_records(text, origin).map_err(err)?,
     };
     let r = py
-        .detach(|| output::aggregate_records(&items, origin, &s))
+        .detach(|| output::aggregate_records(&items, &[], origin, &s))
         .map_err(err)?;
     match r.result {
         Ok(_) => Ok(r.file.to_json_string()),

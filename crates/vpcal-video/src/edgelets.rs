@@ -10,7 +10,7 @@
 //! line (measured on the synthetic suite: horizon roll from edgelets 4.7° off at 1.5 px,
 //! 0.8° at 3 px on synth05).
 
-use image::RgbImage;
+use image::{GrayImage, RgbImage};
 use vpcal_geom::aggregate::edgelets::Edgelet;
 use vpcal_geom::BoxPx;
 
@@ -33,6 +33,14 @@ pub struct EdgeletOptions {
     pub inset: u32,
     /// Boxes smaller than this (width, height) give none.
     pub min_box: (u32, u32),
+    /// The Gaussian kernels reach this many standard deviations. The square of a separable
+    /// kernel cut off at 3 is not quite round: it turns edges by a few hundredths of a degree
+    /// depending on their angle, which a long line far from its vanishing point turns into
+    /// pixels (`crate::background`).
+    pub reach_sigmas: f32,
+    /// Only pixels on an edge (whose gradient is at least the tensor's RMS) give edgelets;
+    /// else every coherent pixel within the tensor's reach of one does.
+    pub on_edge_only: bool,
 }
 
 impl Default for EdgeletOptions {
@@ -45,13 +53,15 @@ impl Default for EdgeletOptions {
             cell: 6,
             inset: 2,
             min_box: (16, 8),
+            reach_sigmas: 3.0,
+            on_edge_only: true,
         }
     }
 }
 
-/// A normalised 1-D Gaussian (`order` 0) or its derivative (`order` 1), radius `3 sigma`.
-fn kernel(sigma: f32, order: u8) -> Vec<f32> {
-    let r = (3.0 * sigma).ceil().max(1.0) as i32;
+/// A normalised 1-D Gaussian (`order` 0) or its derivative (`order` 1), radius `reach sigma`.
+fn kernel(sigma: f32, order: u8, reach: f32) -> Vec<f32> {
+    let r = (reach * sigma).ceil().max(1.0) as i32;
     let g: Vec<f32> = (-r..=r)
         .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
         .collect();
@@ -91,7 +101,27 @@ fn convolve(src: &[f32], w: usize, h: usize, k: &[f32], horizontal: bool) -> Vec
 /// Edgelets of `image` inside `bx` (shrunk by the inset, clamped to the image), in frame
 /// pixels, strongest first.
 pub fn edgelets_in_box(image: &RgbImage, bx: &BoxPx, opts: &EdgeletOptions) -> Vec<Edgelet> {
-    let (iw, ih) = (image.width() as f64, image.height() as f64);
+    let grey = |x, y| {
+        let p = image.get_pixel(x, y).0;
+        0.299 * f32::from(p[0]) + 0.587 * f32::from(p[1]) + 0.114 * f32::from(p[2])
+    };
+    edgelets_in((image.width(), image.height()), grey, bx, opts)
+}
+
+/// Edgelets of a grey `image` (the same as [`edgelets_in_box`] of its RGB copy) inside `bx`.
+pub fn edgelets_in_grey(image: &GrayImage, bx: &BoxPx, opts: &EdgeletOptions) -> Vec<Edgelet> {
+    let grey = |x, y| f32::from(image.get_pixel(x, y).0[0]);
+    edgelets_in((image.width(), image.height()), grey, bx, opts)
+}
+
+/// Edgelets of the image of `size` whose grey level at (x, y) is `grey(x, y)`, inside `bx`.
+fn edgelets_in(
+    size: (u32, u32),
+    grey_at: impl Fn(u32, u32) -> f32,
+    bx: &BoxPx,
+    opts: &EdgeletOptions,
+) -> Vec<Edgelet> {
+    let (iw, ih) = (f64::from(size.0), f64::from(size.1));
     // Where edgelets may lie.
     let k = f64::from(opts.inset);
     let kx0 = (bx.x0 + k).ceil().clamp(0.0, iw);
@@ -107,7 +137,8 @@ pub fn edgelets_in_box(image: &RgbImage, bx: &BoxPx, opts: &EdgeletOptions) -> V
         return Vec::new();
     }
     // The pixels the filters read: the filters' reach around it.
-    let pad = (3.0 * opts.sigma_t).ceil() as f64 + (3.0 * opts.sigma_d).ceil() as f64;
+    let reach = opts.reach_sigmas;
+    let pad = (reach * opts.sigma_t).ceil() as f64 + (reach * opts.sigma_d).ceil() as f64;
     let x0 = (kx0 - pad).max(0.0) as u32;
     let y0 = (ky0 - pad).max(0.0) as u32;
     let x1 = (kx1 + pad).min(iw) as u32;
@@ -116,15 +147,14 @@ pub fn edgelets_in_box(image: &RgbImage, bx: &BoxPx, opts: &EdgeletOptions) -> V
     let mut grey = Vec::with_capacity(w * h);
     for y in y0..y1 {
         for x in x0..x1 {
-            let p = image.get_pixel(x, y).0;
-            grey.push(0.299 * f32::from(p[0]) + 0.587 * f32::from(p[1]) + 0.114 * f32::from(p[2]));
+            grey.push(grey_at(x, y));
         }
     }
-    let g0 = kernel(opts.sigma_d, 0);
-    let g1 = kernel(opts.sigma_d, 1);
+    let g0 = kernel(opts.sigma_d, 0, reach);
+    let g1 = kernel(opts.sigma_d, 1, reach);
     let gx = convolve(&convolve(&grey, w, h, &g1, true), w, h, &g0, false);
     let gy = convolve(&convolve(&grey, w, h, &g0, true), w, h, &g1, false);
-    let gt = kernel(opts.sigma_t, 0);
+    let gt = kernel(opts.sigma_t, 0, reach);
     let smooth = |v: Vec<f32>| convolve(&convolve(&v, w, h, &gt, true), w, h, &gt, false);
     let jxx = smooth(gx.iter().map(|v| v * v).collect());
     let jyy = smooth(gy.iter().map(|v| v * v).collect());
@@ -152,7 +182,7 @@ pub fn edgelets_in_box(image: &RgbImage, bx: &BoxPx, opts: &EdgeletOptions) -> V
             // Off the edge but inside the tensor's reach, the gradient is far below the
             // tensor's RMS; on it, above.
             let g = (gx[i] * gx[i] + gy[i] * gy[i]).sqrt();
-            if g < mag {
+            if opts.on_edge_only && g < mag {
                 continue;
             }
             let c = (y / cell) * cols + x / cell;

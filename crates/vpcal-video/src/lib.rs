@@ -24,6 +24,7 @@
 //! - Frames are RGB, 8 bit, full resolution.
 //! - Frame indices are 0-based over all decoded frames of the source.
 
+pub mod background;
 pub mod crop;
 pub mod detect;
 pub mod draw;

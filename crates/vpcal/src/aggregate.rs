@@ -293,13 +293,32 @@ fn curved_note(e: &robust::Evidence) -> String {
     }
 }
 
-/// Aggregate with `method`; `image_size` is used by the robust method's priors.
+/// What the scene's lines along the road did to VP1, for the summary.
+fn scene_note(e: &robust::Evidence) -> String {
+    match (e.vp1_from_scene_lines, e.vp1_scene_extra_deg) {
+        (true, _) => format!(
+            "; then moved {:.1} px to where {} edgelets of the scene's lines along the road meet",
+            e.vp1_scene_shift_px.unwrap_or(0.0),
+            e.vp1_scene_edgelets
+        ),
+        (false, Some(extra)) => format!(
+            "; the scene's lines along the road meet elsewhere (the vehicles' lines {extra:+.1}° \
+             there): not used"
+        ),
+        (false, None) => String::new(),
+    }
+}
+
+/// Aggregate with `method`; `image_size` is used by the robust method's priors, `scene` (the
+/// edgelets of the scene's background; may be empty) by the robust methods' VP1.
 ///
 /// # Errors
 /// "Not enough evidence" from the method.
+#[allow(clippy::too_many_arguments)]
 pub fn aggregate(
     vehicles: &[VehicleVps],
     edgelets: &[Vec<Edgelet>],
+    scene: &[Edgelet],
     pp: Point2,
     image_size: (u32, u32),
     method: Method,
@@ -339,11 +358,11 @@ pub fn aggregate(
                 tracks: defaults.tracks.clone().filter(|_| method == Method::Robust),
                 ..defaults
             };
-            let r = robust::aggregate_with_edgelets(vehicles, edgelets, pp, &options)?;
+            let r = robust::aggregate_with_scene(vehicles, edgelets, scene, pp, &options)?;
             let e = &r.evidence;
             let mut summary = format!(
                 "robust: {} vehicles, {} used (effective weight {:.0}, {} repeated boxes down-weighted), \
-                 {} VP1 inliers ({}), {} VP2 inliers, roll {:.2}°, {}",
+                 {} VP1 inliers ({}{}), {} VP2 inliers, roll {:.2}°, {}",
                 e.pairs_in,
                 e.pairs_used,
                 e.effective_vehicles,
@@ -373,6 +392,7 @@ pub fn aggregate(
                         curved_note(e)
                     )
                 },
+                scene_note(e),
                 e.vp2_inliers,
                 r.roll.to_degrees(),
                 {
@@ -471,6 +491,10 @@ pub fn aggregate(
                 "curved_vehicles": e.curved_vehicles,
                 "vp1_from_edgelets": e.vp1_from_edgelets,
                 "vp1_edgelets": e.vp1_edgelets,
+                "vp1_from_scene_lines": e.vp1_from_scene_lines,
+                "vp1_scene_edgelets": e.vp1_scene_edgelets,
+                "vp1_scene_shift_px": e.vp1_scene_shift_px,
+                "vp1_scene_extra_deg": e.vp1_scene_extra_deg,
                 "edgelets": e.edgelets,
                 "edgelet_vehicles": e.edgelet_vehicles,
                 "roll_from_edgelets": e.roll_from_edgelets,

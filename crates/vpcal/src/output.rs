@@ -7,7 +7,8 @@ use anyhow::{bail, Context, Result};
 use serde_json::{json, Map, Value};
 use vpcal_formats::bcs::{write_system, SystemCalibration, SystemCar, SystemFile};
 use vpcal_formats::calib::{CalibrationFile, Dropped, InputSummary};
-use vpcal_formats::reference::{infer_image_size, write_vpout, VpOutItem};
+use vpcal_formats::reference::{infer_image_size, write_scene_edgelets, write_vpout, VpOutItem};
+use vpcal_geom::aggregate::edgelets::Edgelet;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_video::{SourceKind, Start};
@@ -208,13 +209,15 @@ pub struct RecordsCalibration {
 }
 
 /// Aggregate per-vehicle records `items` (a VPout file's, named `origin` in the file and in
-/// errors) into a calibration file, as `vpcal aggregate` does.
+/// errors) and the scene's edgelets (`scene`, from `calibrate --scene-edgelets`; may be empty)
+/// into a calibration file, as `vpcal aggregate` does.
 ///
 /// # Errors
 /// A frame size that neither the settings nor the records' boxes give. Too little evidence
 /// is not an error here: the file then says why (`result` holds the reason).
 pub fn aggregate_records(
     items: &[VpOutItem],
+    scene: &[Edgelet],
     origin: &str,
     s: &RecordSettings,
 ) -> Result<RecordsCalibration> {
@@ -247,6 +250,7 @@ pub fn aggregate_records(
     let result = aggregate(
         &vehicles,
         &edgelets_of(items),
+        scene,
         pp,
         (width, height),
         s.method,
@@ -555,6 +559,15 @@ pub fn write_opencv_yaml(path: &Path, file: &CalibrationFile) -> Result<()> {
 /// The file cannot be written.
 pub fn write_vehicles(path: &Path, out: &PipelineOutput) -> Result<()> {
     write_vpout(path, &vehicle_items(out))?;
+    Ok(())
+}
+
+/// Write the scene's edgelets of a run (what `--scene-edgelets` writes).
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write_scene(path: &Path, out: &PipelineOutput) -> Result<()> {
+    write_scene_edgelets(path, &out.scene_edgelets)?;
     Ok(())
 }
 

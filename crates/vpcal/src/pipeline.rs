@@ -22,6 +22,7 @@ use vpcal_geom::camera::Calibration;
 use vpcal_geom::heatmap::VpPrediction;
 use vpcal_geom::{BoxPx, Point2};
 use vpcal_net::VpNet;
+use vpcal_video::background::{scene_edgelet_options, scene_edgelets, BackgroundSampler};
 use vpcal_video::crop::{CropFilter, CropResizer};
 use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
 use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
@@ -36,6 +37,10 @@ use crate::progress::{FrameProgress, Progress};
 /// IoU above which a box of a still is the vehicle a box of an earlier still was (parked cars
 /// in a folder of pictures of one camera move by a few pixels at most between detections).
 pub const STILLS_SEEN_IOU: f64 = 0.7;
+
+/// Frames the scene's background is the median of (at most; at least half as many on inputs
+/// that long), spread evenly over the input.
+const BACKGROUND_FRAMES: usize = 32;
 
 /// At most this many records keep their edgelets (see [`EdgeletBudget`]): the aggregation
 /// fits at most 20,000 edgelets, which 4096 vehicles' near-ray edgelets cover many times.
@@ -303,6 +308,10 @@ pub struct PipelineOutput {
     pub stats: PipelineStats,
     /// A picture of the scene for the overlay: the last frame.
     pub picture: Option<RgbImage>,
+    /// The edgelets of the scene's background (the median of frames sampled over the input,
+    /// `vpcal_video::background`): the lines along the road that place VP1. Empty with
+    /// `--no-edgelets`.
+    pub scene_edgelets: Vec<Edgelet>,
     /// What the user should know about the input (a truncated video, unreadable pictures).
     pub warnings: Vec<String>,
 }
@@ -552,6 +561,7 @@ pub fn run_pipeline_on(
     progress.start(info.expected_frames(&config.frames));
     let t0 = Instant::now();
     let mut last_frame: Option<RgbImage> = None;
+    let mut background = BackgroundSampler::new(BACKGROUND_FRAMES);
     let mut warnings = Vec::new();
     // Frames of the main pass that only taught the detector.
     let mut learning_frames = 0u64;
@@ -578,6 +588,9 @@ pub fn run_pipeline_on(
             Err(e) => return Err(e).with_context(|| format!("reading {}", input.display())),
         };
         stages.stats.frames += 1;
+        if config.edgelets {
+            background.push(&frame.image);
+        }
         stages.frame(&frame, detector.as_mut(), &mut filter)?;
         if detector
             .learned_until()
@@ -629,6 +642,9 @@ pub fn run_pipeline_on(
     // The replayed frames come first in the stream.
     records.sort_by_key(|r| r.frame);
     boxes.sort_by_key(|b| b.frame);
+    let scene_edgelets = background
+        .median()
+        .map_or_else(Vec::new, |bg| scene_edgelets(&bg, &scene_edgelet_options()));
     stats.seconds = t0.elapsed().as_secs_f64();
     Ok(PipelineOutput {
         info,
@@ -638,6 +654,7 @@ pub fn run_pipeline_on(
         boxes,
         stats,
         picture: last_frame,
+        scene_edgelets,
         warnings,
     })
 }
@@ -697,6 +714,7 @@ pub fn calibrate(
     let agg = aggregate(
         &vehicles,
         &edgelets,
+        &out.scene_edgelets,
         pp,
         (out.info.width, out.info.height),
         config.method,

@@ -34,6 +34,8 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
         &o("overlay.png"),
         "--vehicles",
         &o("vehicles.json"),
+        "--scene-edgelets",
+        &o("scene.json"),
         "--bcs-json",
         &o("system.json"),
         "--max-frames",
@@ -76,8 +78,9 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
         assert_eq!((img.width(), img.height()), (320, 240));
         let sys = read_json(&out.path().join("system.json"));
         assert_eq!(sys["camera_calibration"]["vp1"], calib["vp1"]);
-        // The vehicles file carries the edgelets, so `aggregate` on it finds the same camera
-        // (boxes go through centre and half size in the file: equal up to rounding).
+        // The vehicles file carries the edgelets and the scene file the background's, so
+        // `aggregate` on them finds the same camera (boxes go through centre and half size in
+        // the file: equal up to rounding).
         assert!(
             vehicles.iter().any(|v| !v.edgelets.is_empty()),
             "no edgelets written"
@@ -88,10 +91,20 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
             "{}",
             calib["evidence"]
         );
+        // The lane lines and rails of the background moved VP1 (a few pixels: 5.6 on the
+        // whole clip).
+        assert_eq!(
+            calib["evidence"]["vp1_from_scene_lines"], true,
+            "{}",
+            calib["evidence"]
+        );
+        assert!(calib["evidence"]["vp1_scene_edgelets"].as_u64().unwrap() > 500);
         let pp = &calib["pp"];
         let r = vpcal(&[
             "aggregate",
             &o("vehicles.json"),
+            "--scene-edgelets",
+            &o("scene.json"),
             "--pp",
             &format!("{},{}", pp[0], pp[1]),
             "-o",

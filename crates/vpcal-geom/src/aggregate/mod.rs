@@ -10,6 +10,7 @@
 pub mod edgelets;
 pub mod reference;
 pub mod robust;
+pub mod scene_lines;
 pub mod sizes;
 pub mod tracks;
 pub mod vehicle_vp;

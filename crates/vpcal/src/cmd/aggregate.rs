@@ -8,7 +8,7 @@ use vpcal::output::{
     aggregate_records, check_destination, write_bcs_system, RecordSettings, RecordsCalibration,
 };
 use vpcal::pipeline::PrincipalPoint;
-use vpcal_formats::reference::read_vpout;
+use vpcal_formats::reference::{read_scene_edgelets, read_vpout};
 
 use super::{Exit, UsageError};
 
@@ -17,6 +17,10 @@ use super::{Exit, UsageError};
 pub struct Args {
     /// Per-vehicle VP records: the reference's VPout_*.json, or `vpcal calibrate --vehicles`.
     pub vpout: PathBuf,
+    /// The scene's edgelets from `vpcal calibrate --scene-edgelets` (the lines along the road
+    /// that place VP1); without them VP1 comes from the records alone.
+    #[arg(long, value_name = "FILE")]
+    pub scene_edgelets: Option<PathBuf>,
     /// Write the calibration file here (the same file `vpcal calibrate -o` writes).
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
@@ -64,6 +68,10 @@ pub fn run(args: Args) -> Result<Exit> {
         }
     }
     let items = read_vpout(&args.vpout)?;
+    let scene = match &args.scene_edgelets {
+        Some(path) => read_scene_edgelets(path)?,
+        None => Vec::new(),
+    };
     let settings = RecordSettings {
         method: args.method,
         pp: args.pp,
@@ -76,7 +84,7 @@ pub fn run(args: Args) -> Result<Exit> {
         file,
         result,
         image_size: (width, height),
-    } = aggregate_records(&items, &args.vpout.display().to_string(), &settings)?;
+    } = aggregate_records(&items, &scene, &args.vpout.display().to_string(), &settings)?;
     let exit = match &result {
         Ok((cal, agg)) => {
             eprintln!("{}", agg.summary);

@@ -33,6 +33,11 @@ pub struct Args {
     /// Also write the per-vehicle records (deep_vp's `VPout` JSON; non-finite numbers as null).
     #[arg(long, value_name = "FILE")]
     pub vehicles: Option<PathBuf>,
+    /// Also write the edgelets of the scene's background (the median of frames sampled over
+    /// the input), which move VP1 to where the lines along the road meet: with the
+    /// `--vehicles` file, `vpcal aggregate --scene-edgelets FILE` finds the same camera.
+    #[arg(long, value_name = "FILE")]
+    pub scene_edgelets: Option<PathBuf>,
     /// Also write the vehicle tracks: `.csv` (one row per track point: id, frame, time_s,
     /// x_px, y_px (the box's bottom centre, where the vehicle meets the road), clipped,
     /// road_x_m, road_y_m, and the track's speed_kmh, speed_uncertainty_kmh, speed_fit_kmh,
@@ -369,6 +374,7 @@ pub fn run(args: Args) -> Result<Exit> {
         ("--output", &args.output),
         ("--bcs-json", &args.bcs_json),
         ("--vehicles", &args.vehicles),
+        ("--scene-edgelets", &args.scene_edgelets),
         ("--tracks", &args.tracks),
         ("--overlay", &args.overlay),
         ("--opencv", &args.opencv),
@@ -395,6 +401,9 @@ pub fn run(args: Args) -> Result<Exit> {
     print_summary(&out, &result);
     if let Some(path) = &args.vehicles {
         output::write_vehicles(path, &out)?;
+    }
+    if let Some(path) = &args.scene_edgelets {
+        output::write_scene(path, &out)?;
     }
     // The tracks' summary goes to stdout, unless stdout carries the calibration's JSON.
     let say = |line: String| {

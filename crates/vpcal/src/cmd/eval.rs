@@ -615,6 +615,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             let agg = aggregate(
                 &vehicles,
                 &edgelets_of(&items),
+                &[],
                 pp,
                 args.image_size,
                 *method,
