@@ -16,7 +16,7 @@ for root in "$@"; do
     n=$(basename "$d")
     mkdir -p "$OUT/dataset" "$OUT/results/$n"
     ln -sfn "$(realpath "$d")" "$OUT/dataset/$n"
-    args=()
+    read -r -a args <<< "${VPCAL_EXTRA:-}"
     if [ "$DET" = true ]; then args+=(--detections "$d/detections.csv"); else args+=(--detector "$DET"); fi
     if [ "$SCALE" = taped ]; then
       read -r pts dist < <(python3 -c "import json,sys;m=json.load(open(sys.argv[1]))['distanceMeasurement'][0];print(','.join('%.3f'%v for v in m['p1'][:2]+m['p2'][:2]), m['distance'])" "$d/gt_data.json")

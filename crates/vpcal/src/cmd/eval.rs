@@ -25,11 +25,13 @@ use vpcal_formats::bcs_speed::{
     SpeedError, SpeedMode, VideoSpeed,
 };
 use vpcal_formats::reference::read_vpout;
+use vpcal_geom::aggregate::edgelets::Edgelet;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::{
     optimal_scale, ratio_errors, scaled_distance_errors, summarize, RoadMeasurement, Summary,
 };
+use vpcal_video::background::{scene_edgelet_options, scene_edgelets};
 
 /// Evaluate calibrations against BrnoCompSpeed or BrnoCarPark ground truth.
 #[derive(Debug, clap::Subcommand)]
@@ -116,6 +118,11 @@ pub struct VpoutArgs {
     /// Also write every calibration as <DIR>/<video>/system_<variant>_<method>.json.
     #[arg(long)]
     pub write_results: Option<PathBuf>,
+    /// Do not take the scene's lines from each video's `screen.png` (a frame of the video in
+    /// the dataset folder, `video_mask.png` leaving out what is not the scene): VP1 then
+    /// comes from the VPout records alone.
+    #[arg(long)]
+    pub no_scene: bool,
     /// Print machine-readable JSON instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -538,6 +545,40 @@ fn print_row(name: &str, ratio: Option<&Summary>, distance: Option<&Summary>, v:
     }
 }
 
+/// The edgelets of a BrnoCompSpeed video's `screen.png` (one frame of the video), without
+/// those where its `video_mask.png` is black; none without a screen.
+///
+/// # Errors
+/// A screen or mask that cannot be read, or a mask of another size.
+fn video_scene(dir: &Path) -> Result<Vec<Edgelet>> {
+    let screen = dir.join("screen.png");
+    if !screen.exists() {
+        return Ok(Vec::new());
+    }
+    let image = image::open(&screen)
+        .with_context(|| format!("reading {}", screen.display()))?
+        .to_luma8();
+    let mut edgelets = scene_edgelets(&image, &scene_edgelet_options());
+    let mask_path = dir.join("video_mask.png");
+    if mask_path.exists() {
+        let mask = image::open(&mask_path)
+            .with_context(|| format!("reading {}", mask_path.display()))?
+            .to_luma8();
+        if mask.dimensions() != image.dimensions() {
+            bail!(
+                "{}: {}x{}, expected the size of screen.png ({}x{})",
+                mask_path.display(),
+                mask.width(),
+                mask.height(),
+                image.width(),
+                image.height()
+            );
+        }
+        edgelets.retain(|e| mask.get_pixel(e.x as u32, e.y as u32).0[0] > 0);
+    }
+    Ok(edgelets)
+}
+
 /// One variant (VPout file stem) and method, over all videos.
 #[derive(Debug, Clone, Serialize)]
 pub struct VpoutResult {
@@ -558,6 +599,8 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
     let videos = split_videos(&args.dataset, args.split)?;
     // (video, measurements, [(variant, file)])
     let mut work = Vec::new();
+    // The scene's edgelets per video (empty without a screen).
+    let mut scenes: Vec<Vec<Edgelet>> = Vec::new();
     let mut variants = BTreeSet::new();
     for (video, dir) in &videos {
         let vdir = args.vp_outputs.join(video);
@@ -579,7 +622,13 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
         }
         if !files.is_empty() {
             let gt = read_gt(dir)?;
+            let scene = if args.no_scene {
+                Vec::new()
+            } else {
+                video_scene(dir)?
+            };
             work.push((video.clone(), gt.road_measurements(), files));
+            scenes.push(scene);
         }
     }
     if work.is_empty() {
@@ -615,7 +664,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             let agg = aggregate(
                 &vehicles,
                 &edgelets_of(&items),
-                &[],
+                &scenes[*vi],
                 pp,
                 args.image_size,
                 *method,
