@@ -17,6 +17,9 @@
 //! - [`filter::FrameFilter`]: score threshold, static-vehicle rule, at most 10 per frame.
 //! - [`crop::CropResizer`]: the network's input crops and the box frame they refer to.
 //! - [`draw`]: debug pictures with boxes.
+//! - [`background::BackgroundSampler`]: the median of frames sampled over the input (the road
+//!   without its traffic) and [`background::scene_edgelets`], the lines it shows (VP1
+//!   evidence).
 //!
 //! # Conventions
 //! - Frame pixels: x right, y down, origin at the top-left corner; pixel (i, j) covers
