@@ -893,7 +893,8 @@ fn bottom_subrow(
         return whole;
     }
     let vehicle = median(&mut inner);
-    if !(vehicle > noise) {
+    // Also when either is NaN.
+    if vehicle.partial_cmp(&noise) != Some(std::cmp::Ordering::Greater) {
         return whole;
     }
     let cover = |y: u32| -> f64 {
