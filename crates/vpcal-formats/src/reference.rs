@@ -92,15 +92,7 @@ impl VpOutItem {
 
     /// The item's edgelets.
     pub fn edgelets(&self) -> Vec<Edgelet> {
-        self.edgelets
-            .iter()
-            .map(|&[x, y, angle, strength]| Edgelet {
-                x,
-                y,
-                angle,
-                strength,
-            })
-            .collect()
+        self.edgelets.iter().map(|&r| edgelet_from_row(r)).collect()
     }
 
     /// The item as aggregation evidence.
@@ -262,6 +254,21 @@ pub fn write_vpout(path: &Path, items: &[VpOutItem]) -> Result<(), FormatError> 
     )
 }
 
+/// An edgelet as vpcal's files write it: `[x, y, angle, strength]` (frame pixels, radians).
+pub fn edgelet_row(e: &Edgelet) -> [f64; 4] {
+    [e.x, e.y, e.angle, e.strength]
+}
+
+/// The edgelet of a row [`edgelet_row`] wrote.
+pub fn edgelet_from_row([x, y, angle, strength]: [f64; 4]) -> Edgelet {
+    Edgelet {
+        x,
+        y,
+        angle,
+        strength,
+    }
+}
+
 /// Format tag of the scene-edgelets file that `vpcal calibrate --scene-edgelets` writes beside
 /// the per-vehicle records: the edgelets of the scene's background, which move VP1 to where the
 /// lines along the road meet, so that `vpcal aggregate --scene-edgelets` finds the same camera.
@@ -275,7 +282,7 @@ pub const SCENE_EDGELETS_FORMAT: &str = "vpcal-scene-edgelets/1";
 pub fn write_scene_edgelets(path: &Path, edgelets: &[Edgelet]) -> Result<(), FormatError> {
     let rows = edgelets
         .iter()
-        .map(|e| Json::from(&[e.x, e.y, e.angle, e.strength][..]))
+        .map(|e| Json::from(&edgelet_row(e)[..]))
         .collect();
     write_json(
         path,
@@ -309,15 +316,9 @@ pub fn read_scene_edgelets(path: &Path) -> Result<Vec<Edgelet>, FormatError> {
     rows.iter()
         .enumerate()
         .map(|(i, r)| {
-            let [x, y, angle, strength] = r
-                .as_f64_array::<4>(&format!("$.edgelets[{i}]"))
-                .map_err(|e| FormatError::field(path, e))?;
-            Ok(Edgelet {
-                x,
-                y,
-                angle,
-                strength,
-            })
+            r.as_f64_array::<4>(&format!("$.edgelets[{i}]"))
+                .map(edgelet_from_row)
+                .map_err(|e| FormatError::field(path, e))
         })
         .collect()
 }

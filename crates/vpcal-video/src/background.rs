@@ -131,6 +131,12 @@ pub fn scene_edgelets(background: &GrayImage, opts: &EdgeletOptions) -> Vec<Edge
     edgelets_in_grey(background, &whole, &opts)
 }
 
+/// Drop the edgelets where `mask` (of the picture's size) is black: what is not the scene
+/// (a camera's overlay, another carriageway left out).
+pub fn keep_inside(edgelets: &mut Vec<Edgelet>, mask: &GrayImage) {
+    edgelets.retain(|e| mask.get_pixel(e.x as u32, e.y as u32).0[0] > 0);
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -9,7 +9,7 @@
 
 use vpcal_geom::aggregate::scene_lines::{refine_vp1, SceneLineOptions};
 use vpcal_geom::Point2;
-use vpcal_video::background::{scene_edgelet_options, scene_edgelets};
+use vpcal_video::background::{keep_inside, scene_edgelet_options, scene_edgelets};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -24,7 +24,7 @@ fn main() {
     if let Some(mask) = args.get(3) {
         let mask = image::open(mask).expect("reading MASK").to_luma8();
         assert_eq!(mask.dimensions(), image.dimensions(), "MASK size");
-        edgelets.retain(|e| mask.get_pixel(e.x as u32, e.y as u32).0[0] > 0);
+        keep_inside(&mut edgelets, &mask);
     }
     let fit = refine_vp1(start, &edgelets, &SceneLineOptions::default());
     println!(

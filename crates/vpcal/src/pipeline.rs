@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use image::RgbImage;
-use vpcal_formats::reference::VpOutItem;
+use vpcal_formats::reference::{edgelet_row, VpOutItem};
 use vpcal_geom::aggregate::edgelets::{near_rays, Edgelet, EdgeletFitOptions};
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
@@ -269,11 +269,7 @@ impl VehicleRecord {
             pred_vars: p.spreads.clone(),
             vp1_var: Some(p.vp1_spread()),
             vp2_var: Some(p.vp2_spread()),
-            edgelets: self
-                .edgelets
-                .iter()
-                .map(|e| [e.x, e.y, e.angle, e.strength])
-                .collect(),
+            edgelets: self.edgelets.iter().map(edgelet_row).collect(),
         }
     }
 }

@@ -195,7 +195,7 @@ pub struct RobustOptions {
     /// true VP1 by a few degrees the same way (BrnoCompSpeed sessions 0-3, deep_vp's
     /// detections: their median angle at the reference VP1 is 0.0-2.1° above the one at their
     /// own VP1, `scripts/bcs_scene_vp1.py`); a fit that ended on the lines of another
-    /// direction raised it by 7.9°.
+    /// direction raised it by 8.4°.
     #[serde(default = "default_scene_max_extra_deg")]
     pub scene_max_extra_deg: f64,
 }

@@ -31,7 +31,7 @@ use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::{
     optimal_scale, ratio_errors, scaled_distance_errors, summarize, RoadMeasurement, Summary,
 };
-use vpcal_video::background::{scene_edgelet_options, scene_edgelets};
+use vpcal_video::background::{keep_inside, scene_edgelet_options, scene_edgelets};
 
 /// Evaluate calibrations against BrnoCompSpeed or BrnoCarPark ground truth.
 #[derive(Debug, clap::Subcommand)]
@@ -574,7 +574,7 @@ fn video_scene(dir: &Path) -> Result<Vec<Edgelet>> {
                 image.height()
             );
         }
-        edgelets.retain(|e| mask.get_pixel(e.x as u32, e.y as u32).0[0] > 0);
+        keep_inside(&mut edgelets, &mask);
     }
     Ok(edgelets)
 }
@@ -597,10 +597,8 @@ pub struct VpoutResult {
 /// Unreadable directories, ground truth or VPout files; no video with both.
 pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
     let videos = split_videos(&args.dataset, args.split)?;
-    // (video, measurements, [(variant, file)])
+    // (video, measurements, [(variant, file)], the scene's edgelets: empty without a screen)
     let mut work = Vec::new();
-    // The scene's edgelets per video (empty without a screen).
-    let mut scenes: Vec<Vec<Edgelet>> = Vec::new();
     let mut variants = BTreeSet::new();
     for (video, dir) in &videos {
         let vdir = args.vp_outputs.join(video);
@@ -627,8 +625,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             } else {
                 video_scene(dir)?
             };
-            work.push((video.clone(), gt.road_measurements(), files));
-            scenes.push(scene);
+            work.push((video.clone(), gt.road_measurements(), files, scene));
         }
     }
     if work.is_empty() {
@@ -644,7 +641,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
     let jobs: Vec<(usize, String, PathBuf, Method)> = work
         .iter()
         .enumerate()
-        .flat_map(|(vi, (_, _, files))| {
+        .flat_map(|(vi, (_, _, files, _))| {
             files.iter().flat_map(move |(stem, path)| {
                 args.methods
                     .iter()
@@ -657,14 +654,14 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
     let outcomes: Vec<Result<Outcome>> = jobs
         .par_iter()
         .map(|(vi, stem, path, method)| {
-            let (video, measurements, _) = &work[*vi];
+            let (video, measurements, _, scene) = &work[*vi];
             let items = read_vpout(path)?;
             let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
             // The table shows no confidence: skip the bootstrap.
             let agg = aggregate(
                 &vehicles,
                 &edgelets_of(&items),
-                &scenes[*vi],
+                scene,
                 pp,
                 args.image_size,
                 *method,
@@ -712,7 +709,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
         for method in &args.methods {
             let mut videos_rows = Vec::new();
             let mut focals = Vec::new();
-            for (vi, (video, measurements, _)) in work.iter().enumerate() {
+            for (vi, (video, measurements, _, _)) in work.iter().enumerate() {
                 match rows
                     .iter()
                     .find(|r| r.0 == vi && &r.1 == variant && r.2 == *method)
