@@ -333,10 +333,16 @@ pub fn write_bcs_system_with_tracks(
 }
 
 /// The BrnoCompSpeed `cars` of `tracks`: those with at least `min_points` (and at least one)
-/// unclipped points ([`write_bcs_system_with_tracks`]).
+/// unclipped points ([`write_bcs_system_with_tracks`]), and, where a track has a speed, whose
+/// speed is known to [`crate::tracks::BCS_MAX_SPEED_REL_UNCERTAINTY`] of itself.
 pub fn bcs_cars(tracks: &[VehicleTrack], min_points: usize) -> Vec<SystemCar> {
     tracks
         .iter()
+        .filter(|t| {
+            t.speed.is_none_or(|s| {
+                s.uncertainty_kmh <= crate::tracks::BCS_MAX_SPEED_REL_UNCERTAINTY * s.kmh.abs()
+            })
+        })
         .map(VehicleTrack::to_system_car)
         .filter(|c| !c.frames.is_empty() && c.frames.len() >= min_points)
         .collect()
@@ -652,5 +658,18 @@ mod tests {
         assert_eq!(cars[1].pos_x.len(), 10);
         // A limit of 0 still leaves out a track with no unclipped point.
         assert_eq!(bcs_cars(&[track(5, 3, 3)], 0).len(), 0);
+        // A speed known to 10 % of itself is written, one known to 12 % is not.
+        let with_speed = |id, uncertainty_kmh| VehicleTrack {
+            speed: Some(crate::tracks::SpeedEstimate {
+                kmh: 100.0,
+                uncertainty_kmh,
+                fit_kmh: 100.0,
+                windows: 5,
+            }),
+            ..track(id, 20, 0)
+        };
+        let cars = bcs_cars(&[with_speed(6, 10.0), with_speed(7, 12.0)], 10);
+        let ids: Vec<i64> = cars.iter().map(|c| c.id).collect();
+        assert_eq!(ids, vec![6]);
     }
 }
