@@ -315,7 +315,8 @@ fn bcs_system(cal: &Calibration, scale: Option<f64>) -> SystemFile {
 /// ([`TrackSettings::window_points`](crate::tracks::TrackSettings)), so a piece too short for
 /// a speed of ours is not handed to the evaluation as a measured vehicle either (on the six
 /// synthetic speed scenes of the README they were 8 of the motion detector's 41 false
-/// positives and none of its 67 matches; 6 of YOLOX's 37 and 1 of its 58 matches).
+/// positives and none of its 67 matches; 6 of YOLOX's 37 and 1 of its 58 matches), nor is
+/// a track whose speed is too uncertain ([`bcs_cars`]). Returns the number of cars written.
 ///
 /// # Errors
 /// The file cannot be written.
@@ -325,11 +326,12 @@ pub fn write_bcs_system_with_tracks(
     scale: Option<f64>,
     tracks: &[VehicleTrack],
     min_points: usize,
-) -> Result<()> {
+) -> Result<usize> {
     let mut system = bcs_system(cal, scale);
     system.cars = bcs_cars(tracks, min_points);
+    let n = system.cars.len();
     write_system(path, &system)?;
-    Ok(())
+    Ok(n)
 }
 
 /// The BrnoCompSpeed `cars` of `tracks`: those with at least `min_points` (and at least one)

@@ -447,16 +447,22 @@ pub fn run(args: Args) -> Result<Exit> {
                 if let Some(path) = &args.tracks {
                     output::write_tracks(path, &header, &tracks)?;
                 }
+                let mut line = output::tracks_line(&tracks, &header);
                 if let Some(path) = &args.bcs_json {
-                    output::write_bcs_system_with_tracks(
+                    let cars = output::write_bcs_system_with_tracks(
                         path,
                         &cal,
                         scale,
                         &tracks,
                         header.window_points,
                     )?;
+                    line.push_str(&format!(
+                        "; {cars} in the BrnoCompSpeed cars (at least {} unclipped points, speed known to {:.0} %)",
+                        header.window_points,
+                        100.0 * vpcal::tracks::BCS_MAX_SPEED_REL_UNCERTAINTY
+                    ));
                 }
-                say(output::tracks_line(&tracks, &header));
+                say(line);
             }
             if let Some(path) = &args.output {
                 doc.write(path)?;
