@@ -641,6 +641,7 @@ mod tests {
             lateral_m: None,
             lane: None,
             towards_vp1: None,
+            path: vec![],
         }
     }
 
