@@ -1,12 +1,14 @@
 #!/bin/bash
 # Focal length per scene of the synthetic suite (true boxes, bootstrap 30) against the truth,
 # with the focal source and whether the 68 % interval holds the truth. Renders the suite into
-# SUITE_DIR (100 frames) when absent. VPCAL: the binary (default target/release/vpcal).
+# SUITE_DIR (100 frames) when absent. VPCAL: the binary (default target/release/vpcal);
+# VPCAL_EXTRA: more calibrate flags (e.g. `--no-edgelets` to see what the network's VP2 rays
+# give without the edgelets).
 V=${VPCAL:-target/release/vpcal}
 S=${1:?usage: scripts/suite_focal.sh SUITE_DIR}
 [ -d $S/dataset ] || nice $V synth suite -o $S --frames 100 --supersample 1 > $S.render.log 2>&1
 for d in $S/dataset/*/; do n=$(basename $d)
-  nice $V calibrate $d/video.mp4 --detections $d/detections.csv --quiet -o $S/$n.calib.json > /dev/null 2>&1
+  nice $V calibrate $d/video.mp4 --detections $d/detections.csv --quiet ${VPCAL_EXTRA:-} -o $S/$n.calib.json > /dev/null 2>&1
   python3 - "$d" "$S/$n.calib.json" <<'PY'
 import json,sys
 d,c=sys.argv[1],sys.argv[2]

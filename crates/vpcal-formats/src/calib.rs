@@ -205,9 +205,9 @@ pub struct CalibrationFile {
     pub pp: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focal_px: Option<f64>,
-    /// Where the focal length came from: `edgelets`, `network` (the VP2 rays), `prior`
-    /// (assumed: no evidence fixed it), `per_vehicle_median` (the reference method) or
-    /// `given` (`--focal`).
+    /// Where the focal length came from: `edgelets`, `network` (the VP2 rays, trusted),
+    /// `network_rays` (the VP2 rays within the physical prior), `prior` (assumed: no evidence
+    /// fixed it), `per_vehicle_median` (the reference method) or `given` (`--focal`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focal_source: Option<String>,
     /// 68 % interval of the focal length, pixels: the bootstrap's spread and the model error

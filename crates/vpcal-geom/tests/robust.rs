@@ -7,7 +7,10 @@ use proptest::prelude::*;
 use vpcal_geom::aggregate::edgelets::{
     self, fit_curved, near_rays, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
 };
-use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
+use vpcal_geom::aggregate::robust::{
+    aggregate, aggregate_with_edgelets, focal_widths, rays_focal_posterior, RobustOptions,
+    RAYS_MEASURE_WIDTH_SHARE, TRAFFIC_FOV_DEG,
+};
 use vpcal_geom::aggregate::tracks::Tangent;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
@@ -220,6 +223,76 @@ fn cnn_like_vp2_points_too_close_fall_back_to_rays_and_the_focal_prior() {
     let scene = Scene::new(2600.0, 0.3, 0.0, 0.25, 9.0);
     let vehicles = cloud_with(&scene, 1500, 0.3, 21, (0.02, 0.2));
     check(&scene, &vehicles, 0.2, 1.0);
+}
+
+/// `ln` of the width of the physical prior's central 68 %.
+fn prior_log_width() -> f64 {
+    0.68 * (focal_widths(TRAFFIC_FOV_DEG[0]) / focal_widths(TRAFFIC_FOV_DEG[1])).ln()
+}
+
+/// The posterior of rays that place VP2 exactly where `scene`'s camera has it.
+fn exact_rays_posterior(scene: &Scene, sd_deg: f64) -> [f64; 3] {
+    let (vp1, vp2) = (scene.vp([0.0, 1.0, 0.0]), scene.vp([1.0, 0.0, 0.0]));
+    let roll = (vp2.y - vp1.y).atan2(vp2.x - vp1.x);
+    rays_focal_posterior(vp1, scene.pp, 1920.0, [scene.f.ln(), roll], sd_deg).unwrap()
+}
+
+#[test]
+fn the_rays_posterior_narrows_f_where_vp2_is_near_and_is_the_prior_where_it_is_far() {
+    // Looking 34° across the road VP2 is near: a 5° error of its direction moves f little.
+    let near = Scene::new(1100.0, 0.35, 0.0, 0.6, 8.0);
+    let [p16, p50, p84] = exact_rays_posterior(&near, 5.0);
+    assert!(p16 < 1100.0 && 1100.0 < p84, "{p16} {p50} {p84}");
+    assert!((p50 / 1100.0 - 1.0).abs() < 0.05, "{p50}");
+    assert!((p84 / p16).ln() < 0.5 * prior_log_width(), "{p16}-{p84}");
+    // Looking 3° across it VP2 lies far along the horizon: the rays cannot measure f.
+    let far = Scene::new(1100.0, 0.35, 0.0, 0.05, 8.0);
+    let [p16, _, p84] = exact_rays_posterior(&far, 5.0);
+    assert!(
+        (p84 / p16).ln() > RAYS_MEASURE_WIDTH_SHARE * prior_log_width(),
+        "{p16}-{p84}"
+    );
+}
+
+#[test]
+fn a_larger_systematic_error_widens_the_rays_posterior() {
+    let scene = Scene::new(1600.0, 0.3, 0.01, 0.45, 9.0);
+    let mut last = 0.0;
+    for sd in [0.5, 1.0, 2.0, 5.0, 10.0] {
+        let [p16, _, p84] = exact_rays_posterior(&scene, sd);
+        let width = (p84 / p16).ln();
+        assert!(p16 < 1600.0 && 1600.0 < p84, "sd {sd}: {p16}-{p84}");
+        assert!(width > last, "sd {sd}: {width} after {last}");
+        last = width;
+    }
+    let none = rays_focal_posterior(
+        Point2::new(900.0, -800.0),
+        Point2::new(960.0, 540.0),
+        1920.0,
+        [f64::NAN, 0.0],
+        5.0,
+    );
+    assert!(none.is_none());
+}
+
+#[test]
+fn rays_whose_points_are_too_close_still_measure_a_wide_angle_focal_length() {
+    // A 88° view (f = 0.52 widths) looking across the road: the prior's 1.38 widths would
+    // be 2.6 times too long; the rays, with their points useless, place f.
+    let scene = Scene::new(1000.0, 0.35, 0.0, 0.6, 8.0);
+    let vehicles = cloud_with(&scene, 1500, 0.3, 17, (0.02, 0.2));
+    let opts = RobustOptions {
+        image_size: Some([1920.0, 1080.0]),
+        bootstrap: 0,
+        ..RobustOptions::default()
+    };
+    let r = aggregate(&vehicles, scene.pp, &opts).unwrap();
+    assert!(!r.evidence.rays_trusted);
+    assert!(r.evidence.focal_from_rays, "{:?}", r.evidence);
+    let [p16, _, p84] = r.evidence.rays_posterior_px.unwrap();
+    assert!(p16 < 1000.0 && 1000.0 < p84, "{p16}-{p84}");
+    let f = r.calibration.focal_px;
+    assert!((f / 1000.0 - 1.0).abs() < 0.1, "{f}");
 }
 
 #[test]

@@ -59,6 +59,9 @@ pub enum FocalSource {
     Edgelets,
     /// The network's VP2 rays and points agreed (the robust method trusted them).
     Network,
+    /// The network's VP2 rays, which their points contradict, narrowed the physical prior
+    /// to less than half its width (the robust method's `rays_focal_posterior`).
+    NetworkRays,
     /// No evidence fixed it: the robust method's focal prior decided.
     Prior,
     /// The median of the per-vehicle focal lengths (the reference method).
@@ -72,6 +75,7 @@ impl FocalSource {
         match self {
             FocalSource::Edgelets => "edgelets",
             FocalSource::Network => "network",
+            FocalSource::NetworkRays => "network_rays",
             FocalSource::Prior => "prior",
             FocalSource::PerVehicle => "per_vehicle_median",
             FocalSource::Given => "given",
@@ -156,11 +160,7 @@ fn straight_fit_disagreeing(e: &robust::Evidence, focal_px: f64) -> Option<f64> 
     (e.curved_fit && (focal_px / fs).ln().abs() > 2.0 * MEASURED_FOCAL_MODEL_LOG_SD).then_some(fs)
 }
 
-/// An edgelet VP2 farther than this many image widths from the principal point says the
-/// edges across the vehicles are parallel in the image (f > 100 widths is a 0.6° view: no
-/// traffic camera): the view looks almost straight down, or VP1 and VP2 cannot both be
-/// placed, and the focal length is not observable.
-pub const PARALLEL_EDGES_VP2_WIDTHS: f64 = 100.0;
+pub use vpcal_geom::aggregate::robust::PARALLEL_EDGES_VP2_WIDTHS;
 
 impl Aggregated {
     /// What the user should know about this calibration: that its focal length is assumed,
@@ -399,7 +399,7 @@ pub fn aggregate(
                     let rays = if e.rays_trusted {
                         "VP2 points agree with the rays (data trusted)"
                     } else {
-                        "VP2 points disagree with the rays (focal prior in use)"
+                        "VP2 points disagree with the rays (points not used)"
                     };
                     let edges = format!("{} edgelets on {} vehicles", e.edgelets, e.edgelet_vehicles);
                     if e.focal_from_edgelets {
@@ -417,16 +417,38 @@ pub fn aggregate(
                 FocalSource::Edgelets
             } else if e.rays_trusted {
                 FocalSource::Network
+            } else if e.focal_from_rays {
+                FocalSource::NetworkRays
             } else {
                 FocalSource::Prior
             };
+            // Where the rays' posterior gave f (measured or, when it stays wide, assumed), its
+            // percentiles are the interval.
+            let posterior = e.rays_posterior_px.filter(|_| e.focal_from_rays);
             // How far a systematic turn of the edges moves f: only the straight edgelet fit
             // that fixed f measures it.
             let turn_log_sd = match focal_source {
                 FocalSource::Edgelets if !e.curved_fit => e.edgelet_focal_bias_log_spread,
                 _ => None,
             };
-            let focal_interval_px = if focal_source.is_assumed() {
+            let rays_note = |e: &robust::Evidence| {
+                format!(
+                    "the rays scatter {} around their own VP2, taken as ±{} off",
+                    deg(e.rays_scatter_deg),
+                    deg(e.rays_vp2_sd_deg)
+                )
+            };
+            let focal_interval_px = if let Some([lo, _, hi]) = posterior {
+                summary.push_str(&format!(
+                    "; focal length {:.0} px from the network's VP2 rays within the {}-{}° prior \
+                     ({}; 68% interval {lo:.0}-{hi:.0} px)",
+                    r.calibration.focal_px,
+                    TRAFFIC_FOV_DEG[0],
+                    TRAFFIC_FOV_DEG[1],
+                    rays_note(e)
+                ));
+                Some([lo, hi])
+            } else if focal_source.is_assumed() {
                 let [lo, hi] = assumed_focal_interval(image_size.0);
                 summary.push_str(&format!(
                     "; focal length ASSUMED ({:.0} px, the prior: no evidence fixed it; a \
@@ -450,7 +472,9 @@ pub fn aggregate(
                 })
             };
             if let Some(c) = &r.confidence {
-                if let (false, Some([lo, hi])) = (focal_source.is_assumed(), focal_interval_px) {
+                if let (false, None, Some([lo, hi])) =
+                    (focal_source.is_assumed(), posterior, focal_interval_px)
+                {
                     let turn = turn_log_sd.map_or(String::new(), |t| {
                         format!(
                             ", a {}° turn of the edges ±{:.0} %",
@@ -506,6 +530,11 @@ pub fn aggregate(
                 "edgelet_focal_bias_log_spread": e.edgelet_focal_bias_log_spread,
                 "roll_deg": r.roll.to_degrees(),
                 "ray_bias_deg": r.ray_bias.to_degrees(),
+                "rays_focal_px": e.rays_focal_px,
+                "rays_scatter_deg": e.rays_scatter_deg,
+                "rays_vp2_sd_deg": e.rays_vp2_sd_deg,
+                "rays_posterior_px": e.rays_posterior_px,
+                "focal_from_rays": e.focal_from_rays,
             });
             let confidence = r.confidence.as_ref().map(|c| Confidence {
                 focal_px_p16: c.focal_px_p16,

@@ -281,7 +281,8 @@ fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
     assert_eq!(given.focal_interval_px, Some([2500.0, 2500.0]));
     assert!(given.warnings.is_empty(), "{:?}", given.warnings);
     // The robust method finds no evidence for the focal length in these records (no edgelets,
-    // VP2 rays it does not trust): it says the focal length is assumed, with the plausible
+    // VP2 rays it does not trust, too weak to narrow the prior): it says the focal length is
+    // assumed, with the plausible
     // range as its interval.
     let robust = tmp.path().join("robust.json");
     let out = vpcal(&[
@@ -307,6 +308,53 @@ fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
         Some(vpcal::aggregate::assumed_focal_interval(1920))
     );
     assert!(robust.summary.unwrap().contains("ASSUMED"));
+}
+
+#[test]
+fn aggregate_takes_the_focal_length_from_rays_that_place_a_near_vp2() {
+    // session1_right with the 1.0-scale public CNN: its VP2 points are far too close (not
+    // trusted) but its rays agree closely on a VP2 near enough to fix f within the prior.
+    let Some(data) = data_dir() else { return };
+    let dir = data.join("bcs/vp_outputs/session1_right");
+    let vpout = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().contains("_1.0s_"))
+        .unwrap();
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data.join("bcs/camera_truth.json")).unwrap())
+            .unwrap();
+    let f_true = truth["cameras"]["session1_right"]["focal_px"]
+        .as_f64()
+        .unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("calib.json");
+    let out = vpcal(&[
+        "aggregate",
+        vpout.to_str().unwrap(),
+        "--pp",
+        "bcs",
+        "-o",
+        path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let calib = read_calibration(&path);
+    assert_eq!(calib.focal_source.as_deref(), Some("network_rays"));
+    // When written: 2038 px (1768-2325) against the reference camera's 2032 px.
+    let f = calib.focal_px.unwrap();
+    assert!((f / f_true - 1.0).abs() < 0.1, "{f} vs {f_true}");
+    let [lo, hi] = calib.focal_interval_px.unwrap();
+    assert!(lo < f_true && f_true < hi, "{lo}-{hi}");
+    assert!((hi / lo).ln() < 0.5, "{lo}-{hi}");
+    assert!(
+        calib.warnings.iter().all(|w| !w.contains("assumed")),
+        "{:?}",
+        calib.warnings
+    );
+    assert!(calib
+        .summary
+        .unwrap()
+        .contains("from the network's VP2 rays within the 15-90° prior"));
 }
 
 #[test]

@@ -46,6 +46,12 @@
 //!    in the biased regime it is Cauchy (its unbounded tail lets systematically deviating
 //!    rays still pull, which measured better on the real CNN outputs: 8.8 / 22 / 9.1 % vs
 //!    9.3 / 21 / 9.0 % pooled for the three public CNNs).
+//!    **Untrusted rays within the prior** ([`rays_focal_posterior`]): otherwise the rays
+//!    alone still place VP2 on a horizon, off by an angle taken as
+//!    [`RAY_SYSTEMATIC_PER_SCATTER`] times their scatter; with the physical prior that gives
+//!    a posterior for `f`, used when it is less than half as wide as the prior
+//!    ([`RAYS_MEASURE_WIDTH_SHARE`]: a near VP2), the rays' own `f` lies in the prior's range
+//!    and the vehicles' edges are not parallel; `f` is then its median, the roll refitted.
 //! 5. **Edgelets** ([`aggregate_with_edgelets`], [`super::edgelets`]): without tracks, VP1
 //!    is re-fitted to the edges along the vehicles (they point at VP1). With the edges across
 //!    the vehicles that point at VP2, (f, roll) is fitted again with VP1 fixed; the roll
@@ -312,6 +318,23 @@ pub struct Evidence {
     /// power of a log-log fit; 1 when they agree, see `super::sizes`); `None` with too few
     /// boxes.
     pub size_slope: Option<f64>,
+    /// Where the VP2 rays were not trusted: the focal length they alone give (pixels), the
+    /// weighted median angle of the rays around it (degrees), the systematic error assumed
+    /// for their VP2 ([`RAY_SYSTEMATIC_PER_SCATTER`] times that, degrees), and the 16th,
+    /// 50th and 84th percentiles of the focal length under the physical prior and that
+    /// evidence ([`rays_focal_posterior`]).
+    #[serde(default)]
+    pub rays_focal_px: Option<f64>,
+    #[serde(default)]
+    pub rays_scatter_deg: Option<f64>,
+    #[serde(default)]
+    pub rays_vp2_sd_deg: Option<f64>,
+    #[serde(default)]
+    pub rays_posterior_px: Option<[f64; 3]>,
+    /// Whether the focal length came from that posterior (its 68 % interval at most
+    /// [`RAYS_MEASURE_WIDTH_SHARE`] of the prior's in `ln f`).
+    #[serde(default)]
+    pub focal_from_rays: bool,
 }
 
 /// The spread of the estimate under resampling of the vehicles.
@@ -868,6 +891,138 @@ fn points_focal(prep: &Prepared, w: &[f64], vp1: Point2, pp: Point2) -> Option<f
     (m > 0.0).then(|| m.sqrt())
 }
 
+/// The systematic error of the VP2 that a network's rays give, as a multiple of the rays'
+/// scatter around it (their weighted median angle, at least [`RAY_MIN_SCATTER_DEG`]): a
+/// network's VP2 error is mostly common to the view, so the rays' agreement is no measure of
+/// it, but networks whose rays scatter more also err more. Calibrated on real data so that the
+/// rays' 68 % focal intervals hold the truth as often as they claim: on BrnoCompSpeed
+/// sessions 0-3 with the three public CNNs' VPout files against `camera_truth.json`
+/// (`scripts/focal_coverage.py`, the rays' posterior used where it passes
+/// [`RAYS_MEASURE_WIDTH_SHARE`]), multiples of 4 / 5 / 6 / 8 gave the rays the focal length of
+/// 17 / 14 / 11 / 8 of 35 videos, their intervals holding the reference focal length for 53 /
+/// 71 / 73 / 75 % of them (median focal error 13.5 / 9.8 / 9.5 / 4.9 %): 5 is the smallest
+/// that covers at least 68 %.
+pub const RAY_SYSTEMATIC_PER_SCATTER: f64 = 5.0;
+
+/// The scatter below which the rays' systematic error is not taken to shrink, degrees.
+pub const RAY_MIN_SCATTER_DEG: f64 = 1.0;
+
+/// The focal length counts as measured by the rays when the 68 % interval of its posterior
+/// spans at most this share of the prior's in `ln f`; wider, it stays assumed.
+pub const RAYS_MEASURE_WIDTH_SHARE: f64 = 0.5;
+
+/// An edgelet VP2 farther than this many image widths from the principal point says the
+/// edges across the vehicles are parallel in the image (f > 100 widths is a 0.6° view: no
+/// traffic camera): the view looks almost straight down, or VP1 and VP2 cannot both be
+/// placed, and the focal length is not observable.
+pub const PARALLEL_EDGES_VP2_WIDTHS: f64 = 100.0;
+
+/// Points of the `ln f` grid the posterior is evaluated on.
+const POSTERIOR_GRID: usize = 400;
+
+/// The focal length's distribution given the network's VP2 rays and the physical prior:
+/// `(ln f, roll)` is what the rays alone fit (with VP1 at `vp1`), `sd_deg` the systematic
+/// error of the VP2 they place. For a candidate `f`, the VP2 orthogonal to VP1 on the rays'
+/// horizon is compared with the rays' VP2 as directions seen through a lens of that focal
+/// length; the likelihood is Gaussian in that angle, the prior uniform in `ln f` over
+/// [`TRAFFIC_FOV_DEG`] (`width` pixels wide). Returns the 16th, 50th and 84th percentiles,
+/// pixels; `None` when the rays' fit is not finite.
+///
+/// The angle, not `ln f`, carries the error because a network errs by angles: a VP2 far
+/// along the horizon moves a long way for a small angle, so the same rays say little about f
+/// there (a telephoto view) and much where VP2 is near (a wide view).
+pub fn rays_focal_posterior(
+    vp1: Point2,
+    pp: Point2,
+    width: f64,
+    rays: [f64; 2],
+    sd_deg: f64,
+) -> Option<[f64; 3]> {
+    let [ln_fr, roll] = rays;
+    if !(ln_fr.is_finite() && roll.is_finite() && sd_deg > 0.0 && width > 0.0) {
+        return None;
+    }
+    let v = vp1 - pp;
+    // VP2 = VP1 + h / u, seen as a direction through a lens of focal length f.
+    let direction = |(h, u): (Point2, f64), f: f64| {
+        let p = v * u + h;
+        [p.x, p.y, u * f]
+    };
+    let angle = |a: [f64; 3], b: [f64; 3]| {
+        let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+        (dot.abs() / (na * nb)).min(1.0).acos()
+    };
+    let rays_vp2 = edge::vp2_direction(vp1, pp, ln_fr, roll);
+    let lo = (width * focal_widths(TRAFFIC_FOV_DEG[1])).ln();
+    let hi = (width * focal_widths(TRAFFIC_FOV_DEG[0])).ln();
+    let s = sd_deg.to_radians();
+    let grid: Vec<f64> = (0..POSTERIOR_GRID)
+        .map(|i| lo + (hi - lo) * (i as f64 + 0.5) / POSTERIOR_GRID as f64)
+        .collect();
+    let log_lik: Vec<f64> = grid
+        .iter()
+        .map(|&ln_f| {
+            let f = ln_f.exp();
+            let here = edge::vp2_direction(vp1, pp, ln_f, roll);
+            let d = angle(direction(rays_vp2, f), direction(here, f)) / s;
+            -0.5 * d * d
+        })
+        .collect();
+    let top = log_lik.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !top.is_finite() {
+        return None;
+    }
+    let mut cumulative = Vec::with_capacity(grid.len());
+    let mut total = 0.0;
+    for l in &log_lik {
+        total += (l - top).exp();
+        cumulative.push(total);
+    }
+    let quantile = |q: f64| {
+        let target = q * total;
+        let i = cumulative
+            .partition_point(|c| *c < target)
+            .min(grid.len() - 1);
+        grid[i].exp()
+    };
+    Some([quantile(0.16), quantile(0.5), quantile(0.84)])
+}
+
+/// What the VP2 rays alone say about the focal length under `model` (its VP1, no priors, no
+/// ray bias): `(ln f, roll)`, the weighted median angle of the rays around that fit
+/// (degrees), and the posterior of [`rays_focal_posterior`].
+fn rays_focal(model: &Vp2Model, w: &[f64], width: f64) -> ([f64; 2], f64, Option<[f64; 3]>) {
+    let free = Vp2Model {
+        fixed_bias: Some(0.0),
+        fixed_ln_f: None,
+        roll_prior: false,
+        ..*model
+    };
+    let x = free.fit(w, None);
+    let (h, u) = free.vp2(x[0], x[1]);
+    let (angles, weights): (Vec<f64>, Vec<f64>) = model
+        .prep
+        .centre
+        .iter()
+        .zip(&model.prep.angle2)
+        .zip(w)
+        .filter(|(_, w)| **w > 0.0)
+        .map(|((c, a), w)| {
+            let d = (model.vp1 - *c) * u + h;
+            (line_angle_diff(a - d.y.atan2(d.x)).abs().to_degrees(), *w)
+        })
+        .unzip();
+    let scatter = crate::metrics::weighted_median(&angles, &weights).unwrap_or(f64::NAN);
+    let sd = RAY_SYSTEMATIC_PER_SCATTER * scatter.max(RAY_MIN_SCATTER_DEG);
+    let posterior = scatter
+        .is_finite()
+        .then(|| rays_focal_posterior(model.vp1, model.pp, width, [x[0], x[1]], sd))
+        .flatten();
+    ([x[0], x[1]], scatter, posterior)
+}
+
 /// Fit (ln f, roll, bias) for `model` with vehicle weights `w` (`w1` for the VP1 lines);
 /// returns VP1 (refined when the rays are trusted), the parameters, and whether the rays were
 /// trusted.
@@ -876,9 +1031,10 @@ fn points_focal(prep: &Prepared, w: &[f64], vp1: Point2, pp: Point2) -> Option<f
 /// distance bias of the public CNNs), the data are trusted: the focal and roll priors are
 /// dropped, the ray bias is fixed at zero, and VP1, f and the roll are refined jointly on the
 /// VP1 lines and VP2 rays. Real CNNs that put VP2 far too close fail this check; then the
-/// focal length is the prior's median (assumed, not fitted: with a free ray bias the rays'
-/// pull on `f` made it worse both on the public CNNs' BrnoCompSpeed outputs and on the
-/// synthetic demo) and the roll and ray bias are fitted under their priors.
+/// focal length is held at `model.f0` (the prior's median, or the rays' posterior median
+/// once [`rays_focal`] measured it; not fitted here: with a free ray bias the rays' pull on
+/// `f` made it worse both on the public CNNs' BrnoCompSpeed outputs and on the synthetic
+/// demo) and the roll and ray bias are fitted under their priors.
 fn fit_camera(
     model: &Vp2Model,
     vp1_lines: &Vp1Lines,
@@ -1309,9 +1465,50 @@ pub fn aggregate_with_scene(
     let scene_shift = scene_vp1.map(|f| (f.vp1 - vp1).norm());
     let vp1 = scene_vp1.map_or(vp1, |f| f.vp1);
     let model = Vp2Model { vp1, ..model };
+    // Rays the VP2 points contradict still say something about f where VP2 is near: the
+    // focal length is the posterior of the prior and their evidence (`rays_focal_posterior`).
+    let rays = (!rays_trusted).then(|| rays_focal(&model, &prep.weight, width));
+    let posterior = rays.and_then(|r| r.2);
+    let prior_log_width = {
+        let (_, prior_sd) = physical_focal_prior();
+        // The central 68 % of a uniform distribution spans 0.68 of its range.
+        0.68 * prior_sd * 12f64.sqrt()
+    };
+    // Rays whose own focal length lies outside the prior's range contradict it (a VP2 at
+    // infinity, typically): the posterior then piles up at the range's end, narrow but not
+    // measured.
+    let inside_prior = |f: f64| {
+        (focal_widths(TRAFFIC_FOV_DEG[1])..=focal_widths(TRAFFIC_FOV_DEG[0])).contains(&(f / width))
+    };
+    // The edges across the vehicles, where they say those edges are parallel in the image
+    // (a view looking almost straight down), contradict rays that place VP2 near.
     let edge_fit = edge_opts.and_then(|eo| edge::fit(vp1, pp, width, &boxes, x[1], eo, opts.seed));
-    let usable = edge_fit.filter(|e| e.roll_usable);
+    let edges_parallel = edge_fit.is_some_and(|e| {
+        let w = (e.vp2 - pp).norm() / width;
+        w.is_nan() || w > PARALLEL_EDGES_VP2_WIDTHS
+    });
+    let focal_from_rays = !edges_parallel
+        && rays.is_some_and(|r| inside_prior(r.0[0].exp()))
+        && posterior.is_some_and(|[p16, _, p84]| {
+            (p84 / p16).ln() <= RAYS_MEASURE_WIDTH_SHARE * prior_log_width
+        });
     let mut x = x;
+    // A posterior that stays nearly as wide as the prior is not used: weak rays would only
+    // pull the assumed focal length around (on the BrnoCompSpeed dev videos they doubled its
+    // median error).
+    let model = match posterior.filter(|_| focal_from_rays) {
+        Some([_, p50, _]) => {
+            let m = Vp2Model { f0: p50, ..model };
+            x = Vp2Model {
+                fixed_ln_f: Some(p50.ln()),
+                ..m
+            }
+            .fit(&prep.weight, Some([p50.ln(), x[1], x[2]]));
+            m
+        }
+        None => model,
+    };
+    let usable = edge_fit.filter(|e| e.roll_usable);
     if let Some(e) = usable {
         x[1] = e.roll;
         if e.focal_usable {
@@ -1425,6 +1622,15 @@ pub fn aggregate_with_scene(
         edgelet_vp2_widths: edge_fit.map(|e| (e.vp2 - pp).norm() / width),
         edgelet_focal_bias_log_spread: edge_fit.map(|e| e.focal_bias_log_spread),
         size_slope: sizes.map(|s| s.slope),
+        rays_focal_px: rays.map(|r| r.0[0].exp()),
+        rays_scatter_deg: rays.map(|r| r.1),
+        rays_vp2_sd_deg: rays
+            .map(|r| RAY_SYSTEMATIC_PER_SCATTER * r.1.max(RAY_MIN_SCATTER_DEG))
+            .filter(|s| s.is_finite()),
+        rays_posterior_px: posterior,
+        focal_from_rays: focal_from_rays
+            && !usable.is_some_and(|e| e.focal_usable)
+            && curved_fit.is_none(),
     };
     let confidence = (opts.bootstrap > 0).then(|| {
         let data_only = Vp2Model {

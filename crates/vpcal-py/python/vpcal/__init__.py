@@ -536,8 +536,8 @@ class Calibration:
 
     @property
     def focal_source(self) -> Optional[str]:
-        """Where the focal length came from: edgelets, network, given, prior (assumed) or
-        per_vehicle_median."""
+        """Where the focal length came from: edgelets, network, network_rays (the VP2 rays
+        within the physical prior), given, prior (assumed) or per_vehicle_median."""
         return self._doc.get("focal_source")
 
     @property
