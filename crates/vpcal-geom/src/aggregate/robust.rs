@@ -50,8 +50,9 @@
 //!    alone still place VP2 on a horizon, off by an angle taken as
 //!    [`RAY_SYSTEMATIC_PER_SCATTER`] times their scatter; with the physical prior that gives
 //!    a posterior for `f`, used when it is less than half as wide as the prior
-//!    ([`RAYS_MEASURE_WIDTH_SHARE`]: a near VP2), the rays' own `f` lies in the prior's range
-//!    and the vehicles' edges are not parallel; `f` is then its median, the roll refitted.
+//!    ([`RAYS_MEASURE_WIDTH_SHARE`]: a near VP2), the rays' own `f` lies in the prior's range,
+//!    the road is straight and the vehicles' edges are not parallel; `f` is then its median,
+//!    the roll refitted.
 //! 5. **Edgelets** ([`aggregate_with_edgelets`], [`super::edgelets`]): without tracks, VP1
 //!    is re-fitted to the edges along the vehicles (they point at VP1). With the edges across
 //!    the vehicles that point at VP2, (f, roll) is fitted again with VP1 fixed; the roll
@@ -1487,7 +1488,9 @@ pub fn aggregate_with_scene(
         let w = (e.vp2 - pp).norm() / width;
         w.is_nan() || w > PARALLEL_EDGES_VP2_WIDTHS
     });
+    // On a curved road every car has its own VP2: one VP2 for all the rays is the wrong model.
     let focal_from_rays = !edges_parallel
+        && !road_curved
         && rays.is_some_and(|r| inside_prior(r.0[0].exp()))
         && posterior.is_some_and(|[p16, _, p84]| {
             (p84 / p16).ln() <= RAYS_MEASURE_WIDTH_SHARE * prior_log_width
