@@ -8,8 +8,8 @@ use vpcal_geom::aggregate::edgelets::{
     self, fit_curved, near_rays, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
 };
 use vpcal_geom::aggregate::robust::{
-    aggregate, aggregate_with_edgelets, focal_widths, rays_focal_posterior, RobustOptions,
-    RAYS_MEASURE_WIDTH_SHARE, TRAFFIC_FOV_DEG,
+    aggregate, aggregate_with_edgelets, focal_prior_range_widths, focal_widths,
+    rays_focal_posterior, RobustOptions, RAYS_MEASURE_WIDTH_SHARE, TRAFFIC_FOV_DEG,
 };
 use vpcal_geom::aggregate::tracks::Tangent;
 use vpcal_geom::aggregate::VehicleVps;
@@ -234,7 +234,8 @@ fn prior_log_width() -> f64 {
 fn exact_rays_posterior(scene: &Scene, sd_deg: f64) -> [f64; 3] {
     let (vp1, vp2) = (scene.vp([0.0, 1.0, 0.0]), scene.vp([1.0, 0.0, 0.0]));
     let roll = (vp2.y - vp1.y).atan2(vp2.x - vp1.x);
-    rays_focal_posterior(vp1, scene.pp, 1920.0, [scene.f.ln(), roll], sd_deg).unwrap()
+    let range = focal_prior_range_widths(None).map(|r| r * 1920.0);
+    rays_focal_posterior(vp1, scene.pp, range, [scene.f.ln(), roll], sd_deg).unwrap()
 }
 
 #[test]
@@ -268,7 +269,7 @@ fn a_larger_systematic_error_widens_the_rays_posterior() {
     let none = rays_focal_posterior(
         Point2::new(900.0, -800.0),
         Point2::new(960.0, 540.0),
-        1920.0,
+        [960.0, 7300.0],
         [f64::NAN, 0.0],
         5.0,
     );
@@ -293,6 +294,33 @@ fn rays_whose_points_are_too_close_still_measure_a_wide_angle_focal_length() {
     assert!(p16 < 1000.0 && 1000.0 < p84, "{p16}-{p84}");
     let f = r.calibration.focal_px;
     assert!((f / 1000.0 - 1.0).abs() < 0.1, "{f}");
+}
+
+#[test]
+fn a_known_focal_range_bounds_the_rays_and_the_assumed_focal_length() {
+    let scene = Scene::new(1000.0, 0.35, 0.0, 0.6, 8.0);
+    let vehicles = cloud_with(&scene, 1500, 0.3, 17, (0.02, 0.2));
+    let with_range = |range: [f64; 2]| {
+        let opts = RobustOptions {
+            image_size: Some([1920.0, 1080.0]),
+            bootstrap: 0,
+            focal_range_widths: Some(range.map(|f| f / 1920.0)),
+            focal_prior_ratio: (range[0] * range[1]).sqrt() / 1920.0,
+            ..RobustOptions::default()
+        };
+        aggregate(&vehicles, scene.pp, &opts).unwrap()
+    };
+    // A range around the truth: the rays measure f inside it.
+    let r = with_range([700.0, 1400.0]);
+    assert!(r.evidence.focal_from_rays, "{:?}", r.evidence);
+    let [p16, _, p84] = r.evidence.rays_posterior_px.unwrap();
+    assert!(700.0 <= p16 && p84 <= 1400.0, "{p16}-{p84}");
+    assert!((r.calibration.focal_px / 1000.0 - 1.0).abs() < 0.1);
+    // A range the rays contradict: they do not measure, f is the range's middle.
+    let r = with_range([2000.0, 4000.0]);
+    assert!(!r.evidence.focal_from_rays);
+    let middle = (2000.0f64 * 4000.0).sqrt();
+    assert!((r.calibration.focal_px - middle).abs() < 1e-6 * middle);
 }
 
 #[test]

@@ -137,6 +137,7 @@ fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
         c.pp = v;
     }
     c.focal_px = opt(d, "focal", "a number of pixels")?;
+    c.focal_range_px = opt(d, "focal_range", "(short, long) focal lengths in pixels")?;
     c.validate().map_err(err)?;
     Ok(c)
 }
@@ -411,7 +412,7 @@ fn calibrate_frames(
 }
 
 /// Aggregation settings: `method`, `pp`, `image_size` (w, h), `min_score`, `bootstrap`,
-/// `focal`.
+/// `focal`, `focal_range` (short, long).
 fn record_settings(d: &Bound<'_, PyDict>) -> PyResult<RecordSettings> {
     let mut s = RecordSettings::default();
     if let Some(v) = parsed(d, "method")? {
@@ -428,6 +429,7 @@ fn record_settings(d: &Bound<'_, PyDict>) -> PyResult<RecordSettings> {
         s.bootstrap = v;
     }
     s.focal_px = opt(d, "focal", "a number of pixels")?;
+    s.focal_range_px = opt(d, "focal_range", "(short, long) focal lengths in pixels")?;
     Ok(s)
 }
 

@@ -31,6 +31,18 @@ def test_aggregating_a_vpout_file_matches_the_cli_bit_for_bit(vpout, cli, tmp_pa
     assert cal.to_dict()["settings"]["method"] == method
 
 
+def test_a_focal_range_replaces_the_prior_as_in_the_cli(vpout, cli, tmp_path):
+    args = ("aggregate", str(vpout), "--pp", "bcs", "--focal-range", "1500,2500")
+    r = cli(*args, "-o", str(tmp_path / "cli.json"))
+    assert r.returncode == 0, r.stderr
+    cal = vpcal.aggregate(vpout, pp="bcs", focal_range=(1500, 2500))
+    cal.save(tmp_path / "py.json")
+    assert (tmp_path / "py.json").read_bytes() == (tmp_path / "cli.json").read_bytes()
+    lo, hi = cal.focal_interval_px
+    assert 1500 <= lo < cal.focal_px < hi <= 2500
+    assert cal.to_dict()["settings"]["focal_range"] == [1500, 2500]
+
+
 def test_aggregating_arrays_matches_the_cli_on_the_same_records(vpout, cli, tmp_path):
     items = json.loads(vpout.read_text())[:800]
     vp1 = np.array([i["vp1"] for i in items], dtype=float)

@@ -37,6 +37,8 @@ def test_the_same_message_as_the_cli(tmp_path, cli):
         ({"pp": "middle"}, ValueError, "pp: expected `centre`, `bcs` or a point"),
         ({"every": "two"}, TypeError, "every: expected an int, got str"),
         ({"focal": -3.0}, vpcal.VpcalError, "--focal -3"),
+        ({"focal_range": (2000.0, 1000.0)}, vpcal.VpcalError, "--focal-range 2000,1000"),
+        ({"focal": 900.0, "focal_range": (500.0, 2000.0)}, vpcal.VpcalError, "give one"),
         ({"road_mask": "m.png"}, vpcal.VpcalError, "--road-mask applies to the motion detector"),
         ({"scale_points": (1, 2, 3, 4)}, ValueError, "scale_points and scale_distance go together"),
         ({"colour": "red"}, TypeError, "unknown option 'colour'"),

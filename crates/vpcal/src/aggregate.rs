@@ -116,10 +116,30 @@ pub fn measured_focal_interval(f: f64, bootstrap: [f64; 2], turn_log_sd: f64) ->
 /// central 68 % (16th to 84th percentile) of a distribution uniform in `ln f` over the focal
 /// lengths of [`TRAFFIC_FOV_DEG`] (`f = (W / 2) / tan(fov / 2)`).
 pub fn assumed_focal_interval(width: u32) -> [f64; 2] {
-    let w = f64::from(width);
-    let f_of = |fov_deg: f64| w * vpcal_geom::aggregate::robust::focal_widths(fov_deg);
-    let (lo, hi) = (f_of(TRAFFIC_FOV_DEG[1]).ln(), f_of(TRAFFIC_FOV_DEG[0]).ln());
+    let [short, long] = robust::focal_prior_range_widths(None).map(|r| r * f64::from(width));
+    range_focal_interval([short, long])
+}
+
+/// The central 68 % of a distribution uniform in `ln f` over `[short, long]` pixels.
+pub fn range_focal_interval(range_px: [f64; 2]) -> [f64; 2] {
+    let (lo, hi) = (range_px[0].ln(), range_px[1].ln());
     [(lo + 0.16 * (hi - lo)).exp(), (lo + 0.84 * (hi - lo)).exp()]
+}
+
+/// Check a focal-length range `[short, long]` (pixels) given by the user.
+///
+/// # Errors
+/// A message naming `--focal-range` and what was expected.
+pub fn check_focal_range(range_px: [f64; 2]) -> Result<(), String> {
+    let [short, long] = range_px;
+    if short.is_finite() && long.is_finite() && 0.0 < short && short < long {
+        Ok(())
+    } else {
+        Err(format!(
+            "--focal-range {short},{long}: expected two positive numbers of pixels, the \
+             shorter first (SHORT,LONG)"
+        ))
+    }
 }
 
 /// The outcome of one aggregation: the two VPs and what to tell the user.
@@ -142,6 +162,8 @@ pub struct Aggregated {
     pub focal_interval_px: Option<[f64; 2]>,
     /// The robust method's evidence (`None` for `reference`), for the warnings.
     pub robust_evidence: Option<robust::Evidence>,
+    /// The camera's focal-length range the user gave (`--focal-range`), pixels.
+    pub focal_range_px: Option<[f64; 2]>,
 }
 
 /// Above this median scatter of the network's VP1 rays around the VP1 they give (degrees),
@@ -168,12 +190,26 @@ impl Aggregated {
     pub fn warnings(&self) -> Vec<String> {
         let mut out = Vec::new();
         if let (FocalSource::Prior, Some([lo, hi])) = (self.focal_source, self.focal_interval_px) {
+            let prior = match self.focal_range_px {
+                Some(_) => "the middle of the given range",
+                None => "the prior",
+            };
             out.push(format!(
-                "the focal length is assumed, not measured ({:.0} px from the prior; \
+                "the focal length is assumed, not measured ({:.0} px from {prior}; \
                  plausible {lo:.0}-{hi:.0} px): distances and speeds carry its error; give \
                  the camera's focal length with --focal PX if it is known",
                 self.focal_px
             ));
+        }
+        if let (Some([a, b]), false) = (self.focal_range_px, self.focal_source.is_assumed()) {
+            if !(a..=b).contains(&self.focal_px) {
+                out.push(format!(
+                    "the measured focal length ({:.0} px, from {}) lies outside the given range \
+                     {a:.0}-{b:.0} px: check the range, or the footage's evidence",
+                    self.focal_px,
+                    self.focal_source.name()
+                ));
+            }
         }
         let Some(e) = &self.robust_evidence else {
             return out;
@@ -324,6 +360,7 @@ pub fn aggregate(
     method: Method,
     min_score: f64,
     bootstrap: usize,
+    focal_range_px: Option<[f64; 2]>,
 ) -> Result<Aggregated, AggregateError> {
     match method {
         Method::Reference => {
@@ -347,13 +384,18 @@ pub fn aggregate(
                 focal_source: FocalSource::PerVehicle,
                 focal_interval_px: None,
                 robust_evidence: None,
+                focal_range_px,
             })
         }
         Method::Robust | Method::RobustNetwork => {
             let defaults = RobustOptions::default();
+            let width = f64::from(image_size.0);
             let options = RobustOptions {
                 min_score,
-                image_size: Some([f64::from(image_size.0), f64::from(image_size.1)]),
+                image_size: Some([width, f64::from(image_size.1)]),
+                focal_range_widths: focal_range_px.map(|r| r.map(|f| f / width)),
+                focal_prior_ratio: focal_range_px
+                    .map_or(defaults.focal_prior_ratio, |[a, b]| (a * b).sqrt() / width),
                 bootstrap,
                 tracks: defaults.tracks.clone().filter(|_| method == Method::Robust),
                 ..defaults
@@ -438,22 +480,27 @@ pub fn aggregate(
                     deg(e.rays_vp2_sd_deg)
                 )
             };
+            let prior_name = match focal_range_px {
+                Some([a, b]) => format!("the given {a:.0}-{b:.0} px range"),
+                None => format!("the {}-{}° prior", TRAFFIC_FOV_DEG[0], TRAFFIC_FOV_DEG[1]),
+            };
             let focal_interval_px = if let Some([lo, _, hi]) = posterior {
                 summary.push_str(&format!(
-                    "; focal length {:.0} px from the network's VP2 rays within the {}-{}° prior \
+                    "; focal length {:.0} px from the network's VP2 rays within {prior_name} \
                      ({}; 68% interval {lo:.0}-{hi:.0} px)",
                     r.calibration.focal_px,
-                    TRAFFIC_FOV_DEG[0],
-                    TRAFFIC_FOV_DEG[1],
                     rays_note(e)
                 ));
                 Some([lo, hi])
             } else if focal_source.is_assumed() {
-                let [lo, hi] = assumed_focal_interval(image_size.0);
+                let [lo, hi] = match focal_range_px {
+                    Some(range) => range_focal_interval(range),
+                    None => assumed_focal_interval(image_size.0),
+                };
                 summary.push_str(&format!(
-                    "; focal length ASSUMED ({:.0} px, the prior: no evidence fixed it; a \
-                     {}-{}° view gives {lo:.0}-{hi:.0} px as its 68% interval)",
-                    r.calibration.focal_px, TRAFFIC_FOV_DEG[0], TRAFFIC_FOV_DEG[1]
+                    "; focal length ASSUMED ({:.0} px, the middle of {prior_name}: no evidence \
+                     fixed it; 68% interval {lo:.0}-{hi:.0} px)",
+                    r.calibration.focal_px
                 ));
                 Some([lo, hi])
             } else {
@@ -555,6 +602,7 @@ pub fn aggregate(
                 focal_source,
                 focal_interval_px,
                 robust_evidence: Some(r.evidence),
+                focal_range_px,
             })
         }
     }
@@ -596,7 +644,29 @@ mod tests {
             focal_source,
             focal_interval_px: Some([900.0, 1100.0]),
             robust_evidence: Some(e),
+            focal_range_px: None,
         }
+    }
+
+    #[test]
+    fn a_measured_focal_length_outside_the_given_range_is_flagged() {
+        let outside = |source: FocalSource, range: [f64; 2]| {
+            let a = Aggregated {
+                focal_range_px: Some(range),
+                ..with_evidence(source, robust::Evidence::default())
+            };
+            a.warnings()
+                .iter()
+                .any(|w| w.contains("outside the given range"))
+        };
+        // f is 1000 px.
+        assert!(outside(FocalSource::Edgelets, [1500.0, 2500.0]));
+        assert!(outside(FocalSource::NetworkRays, [400.0, 900.0]));
+        assert!(!outside(FocalSource::Edgelets, [800.0, 1200.0]));
+        // An assumed focal length is the range's own middle: nothing to flag.
+        assert!(!outside(FocalSource::Prior, [1500.0, 2500.0]));
+        assert!(FocalSource::NetworkRays.name() == "network_rays");
+        assert!(!FocalSource::NetworkRays.is_assumed());
     }
 
     #[test]

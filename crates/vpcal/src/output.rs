@@ -13,7 +13,7 @@ use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_video::{SourceKind, Start};
 
-use crate::aggregate::{aggregate, edgelets_of, Aggregated, Method};
+use crate::aggregate::{aggregate, check_focal_range, edgelets_of, Aggregated, Method};
 use crate::pipeline::{PipelineConfig, PipelineOutput, PrincipalPoint};
 use crate::road::{scale_from_points, KnownDistance};
 use crate::tracks::{build_tracks, summary, TrackSettings, VehicleTrack};
@@ -76,6 +76,7 @@ pub fn settings(out: &PipelineOutput, c: &PipelineConfig) -> Map<String, Value> 
         "bootstrap": c.bootstrap,
         "pp": c.pp.to_json(),
         "focal": c.focal_px,
+        "focal_range": c.focal_range_px,
     });
     match v {
         Value::Object(m) => m,
@@ -184,6 +185,8 @@ pub struct RecordSettings {
     pub min_score: f64,
     pub bootstrap: usize,
     pub focal_px: Option<f64>,
+    /// The focal lengths the camera can have, `[short, long]` pixels (`--focal-range`).
+    pub focal_range_px: Option<[f64; 2]>,
 }
 
 impl Default for RecordSettings {
@@ -195,6 +198,7 @@ impl Default for RecordSettings {
             min_score: 0.1,
             bootstrap: 30,
             focal_px: None,
+            focal_range_px: None,
         }
     }
 }
@@ -246,7 +250,16 @@ pub fn aggregate_records(
         "pp": s.pp.to_json(),
         "image_size": [width, height],
         "focal": s.focal_px,
+        "focal_range": s.focal_range_px,
     });
+    if let Some(range) = s.focal_range_px {
+        check_focal_range(range).map_err(anyhow::Error::msg)?;
+        if s.focal_px.is_some() {
+            anyhow::bail!(
+                "--focal and --focal-range: give one (a known focal length, or the range it lies in)"
+            );
+        }
+    }
     let result = aggregate(
         &vehicles,
         &edgelets_of(items),
@@ -256,6 +269,7 @@ pub fn aggregate_records(
         s.method,
         s.min_score,
         s.bootstrap,
+        s.focal_range_px,
     )
     .with_context(|| format!("aggregating {origin}"))
     .and_then(|agg| agg.into_camera(pp, s.focal_px).map_err(anyhow::Error::msg));

@@ -133,6 +133,9 @@ pub struct PipelineConfig {
     /// A known focal length, pixels (from the camera's data sheet): VP1 and the horizon
     /// still come from the footage.
     pub focal_px: Option<f64>,
+    /// The focal lengths the camera can have, `[short, long]` pixels (e.g. a zoom lens's
+    /// range): the prior the evidence is weighed against, instead of 15-90° views.
+    pub focal_range_px: Option<[f64; 2]>,
 }
 
 impl Default for PipelineConfig {
@@ -153,6 +156,7 @@ impl Default for PipelineConfig {
             bootstrap: 30,
             pp: PrincipalPoint::Centre,
             focal_px: None,
+            focal_range_px: None,
         }
     }
 }
@@ -172,6 +176,12 @@ impl PipelineConfig {
         if let Some(f) = self.focal_px {
             if !(f.is_finite() && f > 0.0) {
                 bail!("--focal {f}: expected a positive number of pixels");
+            }
+        }
+        if let Some(range) = self.focal_range_px {
+            crate::aggregate::check_focal_range(range).map_err(anyhow::Error::msg)?;
+            if self.focal_px.is_some() {
+                bail!("--focal and --focal-range: give one (a known focal length, or the range it lies in)");
             }
         }
         self.frames
@@ -716,6 +726,7 @@ pub fn calibrate(
         config.method,
         config.min_score,
         config.bootstrap,
+        config.focal_range_px,
     )?;
     agg.into_camera(pp, config.focal_px)
         .map_err(anyhow::Error::msg)

@@ -311,6 +311,70 @@ fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
 }
 
 #[test]
+fn a_focal_range_replaces_the_prior_of_traffic_cameras() {
+    let Some(data) = data_dir() else { return };
+    let dir = data.join("bcs/vp_outputs/session4_center");
+    let vpout = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "json"))
+        .unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("calib.json");
+    let vpout = vpout.to_str().unwrap();
+    let out = vpcal(&[
+        "aggregate",
+        vpout,
+        "--pp",
+        "bcs",
+        "--focal-range",
+        "1500,2500",
+        "-o",
+        path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let calib = read_calibration(&path);
+    // No evidence fixes f in these records: the assumed focal length is the range's
+    // geometric middle, its interval the central 68 % of the range.
+    assert_eq!(calib.focal_source.as_deref(), Some("prior"));
+    let f = calib.focal_px.unwrap();
+    assert!((f - (1500.0f64 * 2500.0).sqrt()).abs() < 1e-6, "{f}");
+    assert_eq!(
+        calib.focal_interval_px,
+        Some(vpcal::aggregate::range_focal_interval([1500.0, 2500.0]))
+    );
+    assert!(calib
+        .summary
+        .unwrap()
+        .contains("the given 1500-2500 px range"));
+    assert!(calib
+        .warnings
+        .iter()
+        .any(|w| w.contains("the middle of the given range")));
+    // A reversed range, or a range with a known focal length, is a usage error; no file.
+    let bad = tmp.path().join("bad.json");
+    for extra in [
+        vec!["--focal-range", "2500,1500"],
+        vec!["--focal-range", "1500"],
+        vec!["--focal-range", "1500,2500", "--focal", "2000"],
+    ] {
+        let mut args = vec![
+            "aggregate",
+            vpout,
+            "--pp",
+            "bcs",
+            "-o",
+            bad.to_str().unwrap(),
+        ];
+        args.extend(extra.iter().copied());
+        let out = vpcal(&args);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains("--focal-range"), "{}", stderr(&out));
+        assert!(!bad.exists());
+    }
+}
+
+#[test]
 fn aggregate_takes_the_focal_length_from_rays_that_place_a_near_vp2() {
     // session1_right with the 1.0-scale public CNN: its VP2 points are far too close (not
     // trusted) but its rays agree closely on a VP2 near enough to fix f within the prior.

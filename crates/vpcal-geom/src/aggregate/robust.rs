@@ -106,6 +106,15 @@ pub fn physical_focal_prior() -> (f64, f64) {
     ((long * wide).sqrt(), (long / wide).ln() / 12f64.sqrt())
 }
 
+/// The focal-length prior's range in image widths, `[short, long]`: `range`, or the focal
+/// lengths of [`TRAFFIC_FOV_DEG`] (0.5-3.8 widths).
+pub fn focal_prior_range_widths(range: Option<[f64; 2]>) -> [f64; 2] {
+    range.unwrap_or([
+        focal_widths(TRAFFIC_FOV_DEG[1]),
+        focal_widths(TRAFFIC_FOV_DEG[0]),
+    ])
+}
+
 /// Settings of the robust aggregation; `Default` is what vpcal uses.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RobustOptions {
@@ -116,6 +125,11 @@ pub struct RobustOptions {
     /// The focal length assumed when no evidence fixes it, as a multiple of the image width
     /// (default: the median of [`physical_focal_prior`]).
     pub focal_prior_ratio: f64,
+    /// The focal lengths the camera can have, in image widths (e.g. a zoom lens's range
+    /// from its data sheet), replacing [`TRAFFIC_FOV_DEG`] as the prior's range (uniform in
+    /// `ln f`); `focal_prior_ratio` should then be its geometric middle.
+    #[serde(default)]
+    pub focal_range_widths: Option<[f64; 2]>,
     /// Standard deviation of the roll prior, degrees.
     pub roll_prior_sigma_deg: f64,
     /// Standard deviation of the prior on the CNN's VP2 ray bias, degrees.
@@ -218,6 +232,7 @@ impl Default for RobustOptions {
             min_score: 0.1,
             image_size: None,
             focal_prior_ratio,
+            focal_range_widths: None,
             roll_prior_sigma_deg: 1.0,
             ray_bias_prior_sigma_deg: 2.0,
             ray_scale_deg: 1.0,
@@ -926,8 +941,9 @@ const POSTERIOR_GRID: usize = 400;
 /// error of the VP2 they place. For a candidate `f`, the VP2 orthogonal to VP1 on the rays'
 /// horizon is compared with the rays' VP2 as directions seen through a lens of that focal
 /// length; the likelihood is Gaussian in that angle, the prior uniform in `ln f` over
-/// [`TRAFFIC_FOV_DEG`] (`width` pixels wide). Returns the 16th, 50th and 84th percentiles,
-/// pixels; `None` when the rays' fit is not finite.
+/// `range_px` (`[short, long]` focal lengths, pixels: the [`TRAFFIC_FOV_DEG`] views' unless
+/// the camera's range is known). Returns the 16th, 50th and 84th percentiles, pixels; `None`
+/// when the rays' fit is not finite.
 ///
 /// The angle, not `ln f`, carries the error because a network errs by angles: a VP2 far
 /// along the horizon moves a long way for a small angle, so the same rays say little about f
@@ -935,12 +951,13 @@ const POSTERIOR_GRID: usize = 400;
 pub fn rays_focal_posterior(
     vp1: Point2,
     pp: Point2,
-    width: f64,
+    range_px: [f64; 2],
     rays: [f64; 2],
     sd_deg: f64,
 ) -> Option<[f64; 3]> {
     let [ln_fr, roll] = rays;
-    if !(ln_fr.is_finite() && roll.is_finite() && sd_deg > 0.0 && width > 0.0) {
+    let [short, long] = range_px;
+    if !(ln_fr.is_finite() && roll.is_finite() && sd_deg > 0.0 && 0.0 < short && short < long) {
         return None;
     }
     let v = vp1 - pp;
@@ -956,8 +973,7 @@ pub fn rays_focal_posterior(
         (dot.abs() / (na * nb)).min(1.0).acos()
     };
     let rays_vp2 = edge::vp2_direction(vp1, pp, ln_fr, roll);
-    let lo = (width * focal_widths(TRAFFIC_FOV_DEG[1])).ln();
-    let hi = (width * focal_widths(TRAFFIC_FOV_DEG[0])).ln();
+    let (lo, hi) = (short.ln(), long.ln());
     let s = sd_deg.to_radians();
     let grid: Vec<f64> = (0..POSTERIOR_GRID)
         .map(|i| lo + (hi - lo) * (i as f64 + 0.5) / POSTERIOR_GRID as f64)
@@ -994,7 +1010,11 @@ pub fn rays_focal_posterior(
 /// What the VP2 rays alone say about the focal length under `model` (its VP1, no priors, no
 /// ray bias): `(ln f, roll)`, the weighted median angle of the rays around that fit
 /// (degrees), and the posterior of [`rays_focal_posterior`].
-fn rays_focal(model: &Vp2Model, w: &[f64], width: f64) -> ([f64; 2], f64, Option<[f64; 3]>) {
+fn rays_focal(
+    model: &Vp2Model,
+    w: &[f64],
+    range_px: [f64; 2],
+) -> ([f64; 2], f64, Option<[f64; 3]>) {
     let free = Vp2Model {
         fixed_bias: Some(0.0),
         fixed_ln_f: None,
@@ -1019,7 +1039,7 @@ fn rays_focal(model: &Vp2Model, w: &[f64], width: f64) -> ([f64; 2], f64, Option
     let sd = RAY_SYSTEMATIC_PER_SCATTER * scatter.max(RAY_MIN_SCATTER_DEG);
     let posterior = scatter
         .is_finite()
-        .then(|| rays_focal_posterior(model.vp1, model.pp, width, [x[0], x[1]], sd))
+        .then(|| rays_focal_posterior(model.vp1, model.pp, range_px, [x[0], x[1]], sd))
         .flatten();
     ([x[0], x[1]], scatter, posterior)
 }
@@ -1468,19 +1488,15 @@ pub fn aggregate_with_scene(
     let model = Vp2Model { vp1, ..model };
     // Rays the VP2 points contradict still say something about f where VP2 is near: the
     // focal length is the posterior of the prior and their evidence (`rays_focal_posterior`).
-    let rays = (!rays_trusted).then(|| rays_focal(&model, &prep.weight, width));
+    let range_px = focal_prior_range_widths(opts.focal_range_widths).map(|r| r * width);
+    let rays = (!rays_trusted).then(|| rays_focal(&model, &prep.weight, range_px));
     let posterior = rays.and_then(|r| r.2);
-    let prior_log_width = {
-        let (_, prior_sd) = physical_focal_prior();
-        // The central 68 % of a uniform distribution spans 0.68 of its range.
-        0.68 * prior_sd * 12f64.sqrt()
-    };
+    // The central 68 % of a uniform distribution spans 0.68 of its range.
+    let prior_log_width = 0.68 * (range_px[1] / range_px[0]).ln();
     // Rays whose own focal length lies outside the prior's range contradict it (a VP2 at
     // infinity, typically): the posterior then piles up at the range's end, narrow but not
     // measured.
-    let inside_prior = |f: f64| {
-        (focal_widths(TRAFFIC_FOV_DEG[1])..=focal_widths(TRAFFIC_FOV_DEG[0])).contains(&(f / width))
-    };
+    let inside_prior = |f: f64| (range_px[0]..=range_px[1]).contains(&f);
     // The edges across the vehicles, where they say those edges are parallel in the image
     // (a view looking almost straight down), contradict rays that place VP2 near.
     let edge_fit = edge_opts.and_then(|eo| edge::fit(vp1, pp, width, &boxes, x[1], eo, opts.seed));

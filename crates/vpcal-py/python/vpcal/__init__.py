@@ -73,7 +73,9 @@ class Options:
       ``flip_average`` (False).
     - Aggregation: ``method`` (``"robust"``, ``"robust-network"``, ``"reference"``),
       ``edgelets`` (True), ``replay`` (True), ``bootstrap`` (30), ``pp`` (``"centre"``,
-      ``"bcs"`` or ``(x, y)``), ``focal`` (a known focal length, pixels).
+      ``"bcs"`` or ``(x, y)``), ``focal`` (a known focal length, pixels), ``focal_range``
+      (``(short, long)`` pixels: the focal lengths the camera can have, instead of 15-90°
+      views).
     - Scale and outputs: ``scale_points`` ``(x1, y1, x2, y2)`` and ``scale_distance`` (metres)
       give the metric scale; ``tracks`` (False) computes the vehicle tracks (speeds with a
       scale); ``vehicles`` (False) keeps the per-vehicle VP records.
@@ -101,6 +103,7 @@ class Options:
     bootstrap: Optional[int] = None
     pp: Optional[Union[str, Tuple[float, float]]] = None
     focal: Optional[float] = None
+    focal_range: Optional[Tuple[float, float]] = None
     scale_points: Optional[Tuple[float, float, float, float]] = None
     scale_distance: Optional[float] = None
     tracks: Optional[bool] = None
@@ -115,7 +118,7 @@ class Options:
                 continue
             if isinstance(v, os.PathLike):
                 v = os.fspath(v)
-            if f.name in ("scale_points", "pp") and not isinstance(v, str):
+            if f.name in ("scale_points", "pp", "focal_range") and not isinstance(v, str):
                 v = tuple(float(x) for x in v)
             out[f.name] = v
         return out
@@ -359,6 +362,7 @@ def aggregate(
     min_score: Optional[float] = None,
     bootstrap: Optional[int] = None,
     focal: Optional[float] = None,
+    focal_range: Optional[Tuple[float, float]] = None,
 ) -> "Calibration":
     """Per-vehicle vanishing points to a :class:`Calibration`, as ``vpcal aggregate``.
 
@@ -370,7 +374,8 @@ def aggregate(
 
     The settings are the CLI's (None: its default): ``method`` ("robust"), ``pp`` ("centre",
     "bcs" or (x, y)), ``image_size`` (inferred from a file's boxes), ``min_score`` (0.1),
-    ``bootstrap`` (30), ``focal`` (a known focal length, pixels).
+    ``bootstrap`` (30), ``focal`` (a known focal length, pixels), ``focal_range``
+    (``(short, long)`` pixels, the focal lengths the camera can have).
 
     Raises:
         VpcalError: an unreadable or malformed file (naming the item and field), an unknown
@@ -385,9 +390,11 @@ def aggregate(
         ("min_score", min_score),
         ("bootstrap", bootstrap),
         ("focal", focal),
+        ("focal_range", focal_range),
     ):
         if v is not None:
-            settings[k] = tuple(v) if k in ("pp", "image_size") and not isinstance(v, str) else v
+            tupled = ("pp", "image_size", "focal_range")
+            settings[k] = tuple(v) if k in tupled and not isinstance(v, str) else v
     arrays = vp1 is not None or vp2 is not None
     if arrays:
         if records is not None:

@@ -51,6 +51,12 @@ pub struct Args {
     /// the records.
     #[arg(long, value_name = "PX")]
     pub focal: Option<f64>,
+    /// The focal lengths the camera can have, SHORT,LONG in pixels (e.g. a zoom lens's
+    /// shortest and longest focal length over the pixel pitch, from its data sheet): the range
+    /// the evidence is weighed against instead of 15-90° views; an assumed focal length is its
+    /// geometric middle.
+    #[arg(long, value_name = "SHORT,LONG", value_parser = super::args::focal_range, conflicts_with = "focal")]
+    pub focal_range: Option<[f64; 2]>,
 }
 
 pub fn run(args: Args) -> Result<Exit> {
@@ -79,6 +85,7 @@ pub fn run(args: Args) -> Result<Exit> {
         min_score: args.min_score,
         bootstrap: args.bootstrap,
         focal_px: args.focal,
+        focal_range_px: args.focal_range,
     };
     let RecordsCalibration {
         file,

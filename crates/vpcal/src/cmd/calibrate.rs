@@ -127,6 +127,12 @@ pub struct PipelineArgs {
     /// focal length is measured when the evidence allows, else assumed (and said so).
     #[arg(long, value_name = "PX")]
     pub focal: Option<f64>,
+    /// The focal lengths the camera can have, SHORT,LONG in pixels (e.g. a zoom lens's
+    /// shortest and longest focal length over the pixel pitch, from its data sheet): the range
+    /// the evidence is weighed against instead of 15-90° views; an assumed focal length is its
+    /// geometric middle.
+    #[arg(long, value_name = "SHORT,LONG", value_parser = super::args::focal_range, conflicts_with = "focal")]
+    pub focal_range: Option<[f64; 2]>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -253,6 +259,7 @@ impl PipelineArgs {
             bootstrap: self.bootstrap,
             pp: self.pp,
             focal_px: self.focal,
+            focal_range_px: self.focal_range,
         };
         config.validate()?;
         Ok(config)

@@ -667,6 +667,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                 *method,
                 args.min_score,
                 0,
+                None,
             );
             let (row, focal) = match agg {
                 Ok(a) => {
