@@ -46,16 +46,10 @@ impl BackgroundSampler {
         if k % self.every != 0 {
             return;
         }
-        self.frames.push(
-            image
-                .pixels()
-                .map(|p| {
-                    let [r, g, b] = p.0;
-                    (0.299 * f32::from(r) + 0.587 * f32::from(g) + 0.114 * f32::from(b)).round()
-                        as u8
-                })
-                .collect(),
-        );
+        // ITU-R 601 luma, as the vehicles' edgelets take it (here in OpenCV's fixed point,
+        // 8 bits a pixel for the median).
+        self.frames
+            .push(crate::edges::grey_opencv(image).into_raw());
         if self.frames.len() >= self.cap {
             // Keep the frames at even positions: those at multiples of twice the interval.
             let mut i = 0;
