@@ -555,9 +555,12 @@ fn video_scene(dir: &Path) -> Result<Vec<Edgelet>> {
     if !screen.exists() {
         return Ok(Vec::new());
     }
-    let image = image::open(&screen)
-        .with_context(|| format!("reading {}", screen.display()))?
-        .to_luma8();
+    // The grey `calibrate` takes from a video's frames.
+    let image = vpcal_video::edges::grey_opencv(
+        &image::open(&screen)
+            .with_context(|| format!("reading {}", screen.display()))?
+            .to_rgb8(),
+    );
     let mut edgelets = scene_edgelets(&image, &scene_edgelet_options());
     let mask_path = dir.join("video_mask.png");
     if mask_path.exists() {
