@@ -142,6 +142,28 @@ pub fn check_focal_range(range_px: [f64; 2]) -> Result<(), String> {
     }
 }
 
+/// Check the user's focal-length settings: a valid `--focal-range`, and not both it and
+/// `--focal`.
+///
+/// # Errors
+/// A message naming the flags and what was expected.
+pub fn check_focal_settings(
+    focal_px: Option<f64>,
+    range_px: Option<[f64; 2]>,
+) -> Result<(), String> {
+    let Some(range) = range_px else {
+        return Ok(());
+    };
+    check_focal_range(range)?;
+    if focal_px.is_some() {
+        return Err(
+            "--focal and --focal-range: give one (a known focal length, or the range it lies in)"
+                .to_string(),
+        );
+    }
+    Ok(())
+}
+
 /// The outcome of one aggregation: the two VPs and what to tell the user.
 #[derive(Debug, Clone)]
 pub struct Aggregated {
@@ -464,8 +486,7 @@ pub fn aggregate(
             } else {
                 FocalSource::Prior
             };
-            // Where the rays' posterior gave f (measured or, when it stays wide, assumed), its
-            // percentiles are the interval.
+            // Where the rays' posterior gave f, its percentiles are the interval.
             let posterior = e.rays_posterior_px.filter(|_| e.focal_from_rays);
             // How far a systematic turn of the edges moves f: only the straight edgelet fit
             // that fixed f measures it.

@@ -13,7 +13,7 @@ use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_video::{SourceKind, Start};
 
-use crate::aggregate::{aggregate, check_focal_range, edgelets_of, Aggregated, Method};
+use crate::aggregate::{aggregate, check_focal_settings, edgelets_of, Aggregated, Method};
 use crate::pipeline::{PipelineConfig, PipelineOutput, PrincipalPoint};
 use crate::road::{scale_from_points, KnownDistance};
 use crate::tracks::{build_tracks, summary, TrackSettings, VehicleTrack};
@@ -252,14 +252,7 @@ pub fn aggregate_records(
         "focal": s.focal_px,
         "focal_range": s.focal_range_px,
     });
-    if let Some(range) = s.focal_range_px {
-        check_focal_range(range).map_err(anyhow::Error::msg)?;
-        if s.focal_px.is_some() {
-            anyhow::bail!(
-                "--focal and --focal-range: give one (a known focal length, or the range it lies in)"
-            );
-        }
-    }
+    check_focal_settings(s.focal_px, s.focal_range_px).map_err(anyhow::Error::msg)?;
     let result = aggregate(
         &vehicles,
         &edgelets_of(items),

@@ -178,12 +178,8 @@ impl PipelineConfig {
                 bail!("--focal {f}: expected a positive number of pixels");
             }
         }
-        if let Some(range) = self.focal_range_px {
-            crate::aggregate::check_focal_range(range).map_err(anyhow::Error::msg)?;
-            if self.focal_px.is_some() {
-                bail!("--focal and --focal-range: give one (a known focal length, or the range it lies in)");
-            }
-        }
+        crate::aggregate::check_focal_settings(self.focal_px, self.focal_range_px)
+            .map_err(anyhow::Error::msg)?;
         self.frames
             .validate()
             .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;

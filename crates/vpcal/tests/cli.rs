@@ -6,7 +6,7 @@
 use crate::common;
 
 use common::{read_calibration, real_data, stderr, stdout, vpcal};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The real data root, when its `bcs` folder is there.
 fn data_dir() -> Option<PathBuf> {
@@ -207,15 +207,19 @@ fn eval_bcs_split_selects_sessions() {
     );
 }
 
+/// The VPout file of `video` in the data's `bcs/vp_outputs` whose name contains `part`.
+fn vpout_file(data: &Path, video: &str, part: &str) -> PathBuf {
+    std::fs::read_dir(data.join("bcs/vp_outputs").join(video))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "json") && p.to_string_lossy().contains(part))
+        .unwrap()
+}
+
 #[test]
 fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
     let Some(data) = data_dir() else { return };
-    let dir = data.join("bcs/vp_outputs/session4_center");
-    let vpout = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "json"))
-        .unwrap();
+    let vpout = vpout_file(&data, "session4_center", "");
     let published_dir = data.join("bcs/results/session4_center");
     let published = std::fs::read_dir(&published_dir)
         .unwrap()
@@ -313,12 +317,7 @@ fn aggregate_reference_reproduces_the_published_session4_center_calibration() {
 #[test]
 fn a_focal_range_replaces_the_prior_of_traffic_cameras() {
     let Some(data) = data_dir() else { return };
-    let dir = data.join("bcs/vp_outputs/session4_center");
-    let vpout = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "json"))
-        .unwrap();
+    let vpout = vpout_file(&data, "session4_center", "");
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("calib.json");
     let vpout = vpout.to_str().unwrap();
@@ -379,12 +378,7 @@ fn aggregate_takes_the_focal_length_from_rays_that_place_a_near_vp2() {
     // session1_right with the 1.0-scale public CNN: its VP2 points are far too close (not
     // trusted) but its rays agree closely on a VP2 near enough to fix f within the prior.
     let Some(data) = data_dir() else { return };
-    let dir = data.join("bcs/vp_outputs/session1_right");
-    let vpout = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.to_string_lossy().contains("_1.0s_"))
-        .unwrap();
+    let vpout = vpout_file(&data, "session1_right", "_1.0s_");
     let truth: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(data.join("bcs/camera_truth.json")).unwrap())
             .unwrap();

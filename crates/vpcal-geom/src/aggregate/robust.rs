@@ -1007,14 +1007,22 @@ pub fn rays_focal_posterior(
     Some([quantile(0.16), quantile(0.5), quantile(0.84)])
 }
 
+/// What the VP2 rays alone say about the focal length.
+#[derive(Debug, Clone, Copy)]
+struct RaysFocal {
+    /// Their own fit, `(ln f, roll)`.
+    fit: [f64; 2],
+    /// The weighted median angle of the rays around that fit, and the systematic error
+    /// taken for their VP2 from it, degrees.
+    scatter_deg: f64,
+    sd_deg: f64,
+    /// [`rays_focal_posterior`]'s percentiles.
+    posterior: Option<[f64; 3]>,
+}
+
 /// What the VP2 rays alone say about the focal length under `model` (its VP1, no priors, no
-/// ray bias): `(ln f, roll)`, the weighted median angle of the rays around that fit
-/// (degrees), and the posterior of [`rays_focal_posterior`].
-fn rays_focal(
-    model: &Vp2Model,
-    w: &[f64],
-    range_px: [f64; 2],
-) -> ([f64; 2], f64, Option<[f64; 3]>) {
+/// ray bias).
+fn rays_focal(model: &Vp2Model, w: &[f64], range_px: [f64; 2]) -> RaysFocal {
     let free = Vp2Model {
         fixed_bias: Some(0.0),
         fixed_ln_f: None,
@@ -1041,7 +1049,12 @@ fn rays_focal(
         .is_finite()
         .then(|| rays_focal_posterior(model.vp1, model.pp, range_px, [x[0], x[1]], sd))
         .flatten();
-    ([x[0], x[1]], scatter, posterior)
+    RaysFocal {
+        fit: [x[0], x[1]],
+        scatter_deg: scatter,
+        sd_deg: sd,
+        posterior,
+    }
 }
 
 /// Fit (ln f, roll, bias) for `model` with vehicle weights `w` (`w1` for the VP1 lines);
@@ -1490,7 +1503,7 @@ pub fn aggregate_with_scene(
     // focal length is the posterior of the prior and their evidence (`rays_focal_posterior`).
     let range_px = focal_prior_range_widths(opts.focal_range_widths).map(|r| r * width);
     let rays = (!rays_trusted).then(|| rays_focal(&model, &prep.weight, range_px));
-    let posterior = rays.and_then(|r| r.2);
+    let posterior = rays.and_then(|r| r.posterior);
     // The central 68 % of a uniform distribution spans 0.68 of its range.
     let prior_log_width = 0.68 * (range_px[1] / range_px[0]).ln();
     // Rays whose own focal length lies outside the prior's range contradict it (a VP2 at
@@ -1507,7 +1520,7 @@ pub fn aggregate_with_scene(
     // On a curved road every car has its own VP2: one VP2 for all the rays is the wrong model.
     let focal_from_rays = !edges_parallel
         && !road_curved
-        && rays.is_some_and(|r| inside_prior(r.0[0].exp()))
+        && rays.is_some_and(|r| inside_prior(r.fit[0].exp()))
         && posterior.is_some_and(|[p16, _, p84]| {
             (p84 / p16).ln() <= RAYS_MEASURE_WIDTH_SHARE * prior_log_width
         });
@@ -1641,11 +1654,9 @@ pub fn aggregate_with_scene(
         edgelet_vp2_widths: edge_fit.map(|e| (e.vp2 - pp).norm() / width),
         edgelet_focal_bias_log_spread: edge_fit.map(|e| e.focal_bias_log_spread),
         size_slope: sizes.map(|s| s.slope),
-        rays_focal_px: rays.map(|r| r.0[0].exp()),
-        rays_scatter_deg: rays.map(|r| r.1),
-        rays_vp2_sd_deg: rays
-            .map(|r| RAY_SYSTEMATIC_PER_SCATTER * r.1.max(RAY_MIN_SCATTER_DEG))
-            .filter(|s| s.is_finite()),
+        rays_focal_px: rays.map(|r| r.fit[0].exp()),
+        rays_scatter_deg: rays.map(|r| r.scatter_deg),
+        rays_vp2_sd_deg: rays.map(|r| r.sd_deg).filter(|s| s.is_finite()),
         rays_posterior_px: posterior,
         focal_from_rays: focal_from_rays
             && !usable.is_some_and(|e| e.focal_usable)
