@@ -16,18 +16,75 @@ use crate::error::FormatError;
 use crate::fs::write_atomic;
 
 /// The format tag vpcal writes.
-pub const FORMAT: &str = "vpcal-calibration/2";
-/// The versions of the format readers accept (1 lacks the OpenCV block and the camera height).
-pub const SUPPORTED_VERSIONS: [u32; 2] = [1, 2];
+pub const FORMAT: &str = "vpcal-calibration/3";
+/// The versions of the format readers accept (1 lacks the OpenCV block and the camera height;
+/// 2 has no `rough`/`unreliable` status and keeps the bootstrap's focal percentiles in
+/// `confidence`).
+pub const SUPPORTED_VERSIONS: [u32; 3] = [1, 2, 3];
 
-/// Whether the run produced a camera.
+/// The start of the warning an automatic metric scale carries (dropped once a known distance
+/// gives the scale).
+pub const AUTOMATIC_SCALE_WARNING: &str = "the metric scale is automatic:";
+/// What separates the aggregation's summary from the scale's part of it.
+pub const SCALE_SUMMARY_SEPARATOR: &str = "; scale ";
+
+/// Whether the run produced a camera, and whether it passed the plausibility checks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Status {
-    /// The camera fields are present.
+    /// The camera fields are present and every plausibility check passed.
     Calibrated,
+    /// The camera fields are present, but a result lies outside what is typical of traffic
+    /// cameras and traffic (a speed, the camera's height or tilt, a lane width): `warnings`
+    /// says which; measurements may be off by more than the intervals say.
+    Rough,
+    /// The camera fields are present, but a result is impossible for a traffic camera or for
+    /// road traffic (`warnings` says which): do not measure with it.
+    Unreliable,
     /// The footage did not support a calibration; `reason` says why.
     NotEnoughEvidence,
+}
+
+impl Status {
+    /// The name in calibration files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Status::Calibrated => "calibrated",
+            Status::Rough => "rough",
+            Status::Unreliable => "unreliable",
+            Status::NotEnoughEvidence => "not_enough_evidence",
+        }
+    }
+
+    /// Whether the file has a camera.
+    pub fn has_camera(self) -> bool {
+        self != Status::NotEnoughEvidence
+    }
+
+    /// The lower of two statuses (a camera's status after another check).
+    pub fn worst(self, other: Status) -> Status {
+        let rank = |s: Status| match s {
+            Status::Calibrated => 0,
+            Status::Rough => 1,
+            Status::Unreliable => 2,
+            Status::NotEnoughEvidence => 3,
+        };
+        if rank(other) > rank(self) {
+            other
+        } else {
+            self
+        }
+    }
+}
+
+/// A plausibility check that failed (`vpcal::plausible`): which check, the status it lowers
+/// the calibration to, and the warning it added.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlausibilityCheck {
+    /// `camera` (height, tilt) or `speeds` (the tracks' speeds).
+    pub check: String,
+    pub status: Status,
+    pub warning: String,
 }
 
 /// Boxes the per-frame filter dropped, by reason.
@@ -92,12 +149,11 @@ pub struct ScaleReference {
     pub distance_m: f64,
 }
 
-/// Bootstrap spread of the robust aggregation.
+/// Bootstrap spread of the robust aggregation's horizon and VP1. (The focal length's one
+/// interval is `focal_interval_px`; the bootstrap's own focal percentiles, which version 2
+/// kept here, are diagnostics under `evidence`.)
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Confidence {
-    pub focal_px_p16: f64,
-    pub focal_px_p84: f64,
-    pub focal_px_vp2_rays_only: f64,
     pub horizon_angle_sd_deg: f64,
     pub vp1_sd_px: f64,
     pub resamples: usize,
@@ -280,6 +336,10 @@ pub struct CalibrationFile {
     /// What a user should know about this calibration (an assumed focal length, ...).
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// The plausibility checks that failed, each also in `warnings`; `status` is the lowest of
+    /// theirs (`calibrated` when none failed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub failed_checks: Vec<PlausibilityCheck>,
     /// The settings of the run, by flag name.
     #[serde(default)]
     pub settings: serde_json::Map<String, serde_json::Value>,
@@ -326,6 +386,7 @@ impl CalibrationFile {
             confidence: None,
             summary: None,
             warnings: Vec::new(),
+            failed_checks: Vec::new(),
             settings: serde_json::Map::new(),
             demo: None,
         }
@@ -391,6 +452,14 @@ impl CalibrationFile {
         reference: Option<ScaleReference>,
     ) -> Result<(), String> {
         let cal = self.camera()?;
+        // An earlier scale's warning and summary no longer describe the file.
+        self.warnings
+            .retain(|w| !w.starts_with(AUTOMATIC_SCALE_WARNING));
+        if let Some(summary) = &mut self.summary {
+            if let Some(at) = summary.find(SCALE_SUMMARY_SEPARATOR) {
+                summary.truncate(at);
+            }
+        }
         self.scale_m_per_unit = Some(scale_m_per_unit);
         self.scale_source = reference.as_ref().map(|_| "distance".to_string());
         self.scale_reference = reference;
@@ -416,6 +485,28 @@ impl CalibrationFile {
         Ok(())
     }
 
+    /// Replace the failed plausibility checks named `check` by `failed` (their warnings too),
+    /// and set the status of a file with a camera to the lowest of the failed checks'.
+    pub fn replace_checks(&mut self, check: &str, failed: Vec<PlausibilityCheck>) {
+        let (gone, kept): (Vec<PlausibilityCheck>, Vec<PlausibilityCheck>) =
+            self.failed_checks.drain(..).partition(|c| c.check == check);
+        self.warnings
+            .retain(|w| !gone.iter().any(|c| &c.warning == w));
+        self.failed_checks = kept;
+        for c in failed {
+            if !self.warnings.contains(&c.warning) {
+                self.warnings.push(c.warning.clone());
+            }
+            self.failed_checks.push(c);
+        }
+        if self.status.has_camera() {
+            self.status = self
+                .failed_checks
+                .iter()
+                .fold(Status::Calibrated, |s, c| s.worst(c.status));
+        }
+    }
+
     /// Recompute the OpenCV block and the camera height from the camera and the scale (for
     /// version 1 files, which have neither).
     ///
@@ -439,7 +530,7 @@ impl CalibrationFile {
     /// # Errors
     /// A message naming the field when the file has no camera or a field is missing.
     pub fn camera(&self) -> Result<Calibration, String> {
-        if self.status != Status::Calibrated {
+        if !self.status.has_camera() {
             return Err(format!(
                 "status is \"not_enough_evidence\", not \"calibrated\": this run produced no \
                  camera ({})",
@@ -456,6 +547,76 @@ impl CalibrationFile {
         let pp = field("pp", self.pp)?;
         Calibration::from_vps(vp1, vp2, pp)
             .map_err(|e| format!("vp1, vp2 and pp give no camera: {e}"))
+    }
+
+    /// Check that the fields derived from the camera (`focal_px`, `K`, the OpenCV block's
+    /// matrix and units) agree with the camera of `vp1`, `vp2` and `pp`, which every command
+    /// measures with: a file edited in one place and not the others is refused rather than
+    /// measured with half of its edit.
+    ///
+    /// # Errors
+    /// A message naming the field that disagrees, its value and the camera's.
+    pub fn check_consistency(&self) -> Result<(), String> {
+        let cal = self.camera()?;
+        let f = cal.focal_px;
+        let agree = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1.0);
+        let remedy = "edit vp1/vp2 (the camera every command measures with) or calibrate \
+                      again, with --focal PX for a known focal length";
+        match self.focal_px {
+            Some(v) if v.is_finite() && v > 0.0 && agree(v, f) => {}
+            Some(v) if v.is_finite() && v > 0.0 => {
+                return Err(format!(
+                    "field \"focal_px\" is {v}, but vp1, vp2 and pp give {f:.3} px: {remedy}"
+                ))
+            }
+            Some(v) => {
+                return Err(format!(
+                    "field \"focal_px\" is {v}: expected a positive number of pixels ({f:.3} \
+                     from vp1, vp2 and pp)"
+                ))
+            }
+            None if self.version().is_some_and(|v| v >= 2) => {
+                return Err(format!(
+                    "field \"focal_px\" is missing or null (vp1, vp2 and pp give {f:.3} px)"
+                ))
+            }
+            None => {}
+        }
+        let k_agrees = |k: &Mat3| {
+            agree(k[0][0], f)
+                && agree(k[1][1], f)
+                && agree(k[0][2], cal.pp.x)
+                && agree(k[1][2], cal.pp.y)
+        };
+        if let Some(k) = &self.k {
+            if !k_agrees(k) {
+                return Err(format!(
+                    "field \"K\" is {k:?}, but vp1, vp2 and pp give f = {f:.3} px at pp \
+                     ({:.2}, {:.2}): {remedy}",
+                    cal.pp.x, cal.pp.y
+                ));
+            }
+        }
+        if let Some(cv) = &self.opencv {
+            if !k_agrees(&cv.camera_matrix) {
+                return Err(format!(
+                    "field \"opencv.camera_matrix\" is {:?}, but vp1, vp2 and pp give f = \
+                     {f:.3} px at pp ({:.2}, {:.2}): {remedy}",
+                    cv.camera_matrix, cal.pp.x, cal.pp.y
+                ));
+            }
+            let metric = self.scale_m_per_unit.is_some();
+            if (cv.units == "m") != metric {
+                return Err(format!(
+                    "field \"opencv.units\" is {:?} but \"scale_m_per_unit\" is {}: run \
+                     `vpcal export` to rewrite the OpenCV block from the file's scale",
+                    cv.units,
+                    self.scale_m_per_unit
+                        .map_or("null".to_string(), |s| s.to_string())
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The metric scale, checked.
@@ -614,7 +775,7 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(
-            e.contains("new.json") && e.contains("versions [1, 2]"),
+            e.contains("new.json") && e.contains("versions [1, 2, 3]"),
             "{e}"
         );
         let e = CalibrationFile::from_json_str(r#"{"vp1": [1, 2]}"#, Path::new("s.json"))

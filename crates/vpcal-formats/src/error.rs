@@ -6,22 +6,23 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum FormatError {
     /// The file could not be read or written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        /// Printed in the message, not chained (a chain would print it twice).
+        cause: std::io::Error,
     },
     /// The file is not valid JSON.
-    #[error("{}: invalid JSON at {source}", path.display())]
+    #[error("{}: invalid JSON at {cause}", path.display())]
     Json {
         path: PathBuf,
-        source: crate::json::ParseError,
+        cause: crate::json::ParseError,
     },
     /// A value in the file has the wrong shape.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Field {
         path: PathBuf,
-        source: crate::json::AccessError,
+        cause: crate::json::AccessError,
     },
     /// The file is readable but its content is not what the format requires.
     #[error("{}: {message}", path.display())]
@@ -32,14 +33,14 @@ impl FormatError {
     pub(crate) fn io(path: &Path, source: std::io::Error) -> FormatError {
         FormatError::Io {
             path: path.to_path_buf(),
-            source,
+            cause: source,
         }
     }
 
     pub(crate) fn field(path: &Path, source: crate::json::AccessError) -> FormatError {
         FormatError::Field {
             path: path.to_path_buf(),
-            source,
+            cause: source,
         }
     }
 

@@ -69,9 +69,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> {
 /// [`FormatError::Io`] or [`FormatError::Json`] naming `path`.
 pub fn read_json(path: &Path) -> Result<Json, FormatError> {
     let text = std::fs::read_to_string(path).map_err(|e| FormatError::io(path, e))?;
-    json::parse(&text).map_err(|source| FormatError::Json {
+    json::parse(&text).map_err(|cause| FormatError::Json {
         path: path.to_path_buf(),
-        source,
+        cause,
     })
 }
 

@@ -45,10 +45,10 @@ pub struct RoadFrame {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GeomError {
     /// An input point is NaN or infinite.
-    #[error("{what} is not finite ({value:?})")]
+    #[error("{what} is not finite ({value})")]
     NonFinite { what: &'static str, value: Point2 },
     /// The two vanishing points coincide.
-    #[error("vp1 and vp2 coincide at {0:?}")]
+    #[error("vp1 and vp2 coincide at {0}")]
     CoincidentVps(Point2),
     /// `-(vp1 - pp)·(vp2 - pp)` is not positive: the pair is not orthogonal for any real focal.
     #[error("imaginary focal length: -(vp1-pp)·(vp2-pp) = {value} is not positive")]

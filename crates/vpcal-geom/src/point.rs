@@ -10,6 +10,14 @@ pub struct Point2 {
     pub y: f64,
 }
 
+/// `(x, y)` with the precision asked for (default 2 decimals), for messages.
+impl std::fmt::Display for Point2 {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let p = f.precision().unwrap_or(2);
+        write!(f, "({:.p$}, {:.p$})", self.x, self.y)
+    }
+}
+
 impl Point2 {
     pub const fn new(x: f64, y: f64) -> Point2 {
         Point2 { x, y }

@@ -779,9 +779,11 @@ fn fit_cars(
 
 fn curved_vehicles(cars: &[(Tangent, Vec<Edgelet>)]) -> Vec<CurvedVehicle<'_>> {
     cars.iter()
-        .map(|(t, e)| CurvedVehicle {
+        .enumerate()
+        .map(|(k, (t, e))| CurvedVehicle {
             tangent: *t,
             edgelets: e,
+            vehicle: k,
         })
         .collect()
 }
@@ -839,4 +841,35 @@ fn line_deg(a: f64) -> f64 {
     } else {
         d
     }
+}
+
+/// The bootstrap's unit is the physical vehicle: the boxes of one car moving over 20 frames
+/// share one number; stills (no frame) are one vehicle each.
+#[test]
+fn vehicle_units_group_the_boxes_of_one_moving_vehicle() {
+    let pair = |frame: Option<f64>, x: f64, y: f64| VehicleVps {
+        vp1: Point2::new(900.0, -200.0),
+        vp2: Point2::new(-5000.0, -250.0),
+        score: 0.9,
+        box_px: Some(BoxPx::new(x, y, x + 60.0, y + 40.0)),
+        frame,
+        vp1_spread: None,
+        vp2_spread: None,
+    };
+    let mut pairs = Vec::new();
+    for f in 0..20 {
+        let t = f64::from(f);
+        pairs.push(pair(Some(t), 100.0 + 4.0 * t, 600.0 - 3.0 * t));
+        pairs.push(pair(Some(t), 900.0 - 5.0 * t, 500.0 + 2.0 * t));
+        pairs.push(pair(Some(t), 1500.0 + 3.0 * t, 800.0 - 4.0 * t));
+    }
+    pairs.push(pair(None, 10.0, 10.0));
+    pairs.push(pair(None, 10.0, 10.0));
+    let (unit, n) = vpcal_geom::aggregate::robust::vehicle_units(&pairs);
+    assert_eq!(n, 5, "{unit:?}");
+    for k in 0..3 {
+        let first = unit[k];
+        assert!((0..20).all(|f| unit[3 * f + k] == first), "{unit:?}");
+    }
+    assert_ne!(unit[60], unit[61]);
 }

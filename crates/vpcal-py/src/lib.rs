@@ -269,15 +269,24 @@ fn run_result(
     let known = known_distance(options)?;
     let want_vehicles: bool = opt(options, "vehicles", "a bool")?.unwrap_or(false);
     let want_tracks: bool = opt(options, "tracks", "a bool")?.unwrap_or(false);
+    let want_overlay: bool = opt(options, "overlay", "a bool")?.unwrap_or(false);
     let result = py.detach(|| vpcal::calibrate(out, config));
     let r = PyDict::new(py);
     match &result {
         Ok((cal, agg)) => {
-            let (file, scale) =
-                output::calibrated_run_file(out, config, cal, agg, known).map_err(err)?;
+            let output::CalibratedRun {
+                file,
+                tracks,
+                header,
+                ..
+            } = output::calibrated_run(out, config, cal, agg, known).map_err(err)?;
             if want_tracks {
-                let (tracks, header) = output::run_tracks(out, scale.map(|s| (cal, s)), true);
                 r.set_item("tracks", output::tracks_json(&header, &tracks).to_string())?;
+            }
+            if want_overlay {
+                let cam = Some((cal, agg.track_lines.as_slice()));
+                let scale = file.scale_m_per_unit;
+                set_overlay(py, &r, out, config, cam, &tracks, scale)?;
             }
             r.set_item("ok", true)?;
             r.set_item("calibration", file.to_json_string())?;
@@ -285,8 +294,12 @@ fn run_result(
         Err(e) => {
             let file = output::failure_file(out, config, format!("{e:#}"));
             if want_tracks {
-                let (tracks, header) = output::run_tracks(out, None, false);
+                let (tracks, header) = output::run_tracks(out, None, false, false);
                 r.set_item("tracks", output::tracks_json(&header, &tracks).to_string())?;
+            }
+            if want_overlay {
+                let (tracks, _) = output::run_tracks(out, None, false, false);
+                set_overlay(py, &r, out, config, None, &tracks, None)?;
             }
             r.set_item("ok", false)?;
             r.set_item("reason", format!("{e:#}"))?;
@@ -300,6 +313,33 @@ fn run_result(
     }
     r.set_item("warnings", out.warnings.clone())?;
     Ok(r.unbind())
+}
+
+/// The overlay picture of a run (`calibrate --overlay`'s) as PNG bytes in `r["overlay_png"]`,
+/// when the run has a picture.
+fn set_overlay(
+    py: Python<'_>,
+    r: &Bound<'_, PyDict>,
+    out: &PipelineOutput,
+    config: &PipelineConfig,
+    cam: Option<(
+        &vpcal_geom::camera::Calibration,
+        &[vpcal_geom::aggregate::tracks::TrackLine],
+    )>,
+    tracks: &[vpcal::tracks::VehicleTrack],
+    scale: Option<f64>,
+) -> PyResult<()> {
+    let png = py
+        .detach(|| {
+            vpcal::overlay::draw_run(out, &config.frames, cam, tracks, scale)
+                .map(|img| vpcal_formats::fs::encode_png(&img))
+                .transpose()
+        })
+        .map_err(|e| err(anyhow::anyhow!("the overlay picture: {e}")))?;
+    if let Some(bytes) = png {
+        r.set_item("overlay_png", PyBytes::new(py, &bytes))?;
+    }
+    Ok(())
 }
 
 /// Calibrate from the video, image folder or image at `path` with `options` (the CLI's
@@ -474,7 +514,7 @@ fn parse_records(text: &str, origin: &str) -> anyhow::Result<Vec<VpOutItem>> {
 #[pyfunction]
 fn read_calibration(path: PathBuf) -> PyResult<String> {
     let file = CalibrationFile::read(&path).map_err(|e| err(e.into()))?;
-    if file.status == vpcal_formats::calib::Status::Calibrated {
+    if file.status.has_camera() {
         // A camera that `vpcal measure` would refuse is refused here, naming the file.
         RoadCamera::new(file.clone(), &path.display().to_string()).map_err(err)?;
     }
@@ -492,6 +532,42 @@ fn calibration_from_text(text: &str, origin: &str) -> PyResult<CalibrationFile> 
 fn write_calibration(text: &str, path: PathBuf) -> PyResult<()> {
     let file = calibration_from_text(text, &path.display().to_string())?;
     file.write(&path).map_err(|e| err(e.into()))
+}
+
+/// The HTML report of calibration file JSON text `calibration` (as `calibrate --report`
+/// writes it), with the run's `tracks` (vpcal-tracks/1 JSON text), overlay picture
+/// (`overlay_png`, PNG bytes) and `run_warnings` when given.
+#[pyfunction]
+#[pyo3(signature = (calibration, tracks=None, overlay_png=None, run_warnings=Vec::new()))]
+fn render_report(
+    calibration: &str,
+    tracks: Option<&str>,
+    overlay_png: Option<&[u8]>,
+    run_warnings: Vec<String>,
+) -> PyResult<String> {
+    let file = calibration_from_text(calibration, "calibration")?;
+    let doc: Option<serde_json::Value> = tracks
+        .map(serde_json::from_str)
+        .transpose()
+        .map_err(|e| PyValueError::new_err(format!("tracks: not a JSON document: {e}")))?;
+    let list = doc.as_ref().map(vpcal::report::tracks_from_json);
+    let note = doc
+        .as_ref()
+        .and_then(|d| d.get("note"))
+        .and_then(serde_json::Value::as_str);
+    let input = vpcal::report::ReportInput {
+        overlay_png,
+        tracks: list.as_deref(),
+        tracks_note: note,
+        run_warnings: &run_warnings,
+    };
+    Ok(vpcal::report::render_with(&file, &input))
+}
+
+/// Write report `html` to `path` (atomically, as the CLI writes it).
+#[pyfunction]
+fn write_report(path: PathBuf, html: &str) -> PyResult<()> {
+    vpcal::report::write(&path, html).map_err(err)
 }
 
 /// A known length on the road: two pixels `(x1, y1, x2, y2)` and metres.
@@ -791,6 +867,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_calibration, m)?)?;
     m.add_function(wrap_pyfunction!(write_calibration, m)?)?;
     m.add_function(wrap_pyfunction!(set_scale, m)?)?;
+    m.add_function(wrap_pyfunction!(render_report, m)?)?;
+    m.add_function(wrap_pyfunction!(write_report, m)?)?;
     m.add_class::<PyRoadCamera>()?;
     m.add_class::<PyDetector>()?;
     m.add_class::<PyNetwork>()?;

@@ -22,11 +22,12 @@ pub enum VideoError {
     },
 
     /// A file or folder could not be opened or read.
-    #[error("{action}: {source}: {}", path.display())]
+    #[error("{action}: {cause}: {}", path.display())]
     Io {
         action: &'static str,
         path: PathBuf,
-        source: std::io::Error,
+        /// Printed in the message, not chained (a chain would print it twice).
+        cause: std::io::Error,
     },
 
     /// The file is not something FFmpeg can read as video.
@@ -85,7 +86,7 @@ impl VideoError {
         VideoError::Io {
             action,
             path: path.into(),
-            source,
+            cause: source,
         }
     }
 }

@@ -236,17 +236,8 @@ impl Aggregated {
         let Some(e) = &self.robust_evidence else {
             return out;
         };
-        if let Some(scatter) = e
-            .vp1_ray_scatter_deg
-            .filter(|s| !e.vp1_from_tracks && !e.vp1_from_edgelets && *s > WEAK_VP1_RAY_SCATTER_DEG)
-        {
-            out.push(format!(
-                "VP1 rests on the network's VP1 rays alone ({} vehicles agree, their median \
-                 angle to it {scatter:.1}°; no straight vehicle tracks): the road direction, \
-                 and everything measured from it, is weakly supported; use longer footage of \
-                 moving traffic",
-                e.vp1_inliers
-            ));
+        if let Some(w) = self.weak_vp1_warning() {
+            out.push(w);
         }
         if let Some(fs) = straight_fit_disagreeing(e, self.focal_px) {
             out.push(format!(
@@ -261,17 +252,33 @@ impl Aggregated {
             .filter(|w| !e.focal_from_edgelets && (w.is_nan() || *w > PARALLEL_EDGES_VP2_WIDTHS))
         {
             out.push(format!(
-                "the edges across the vehicles are parallel in the image (their VP2 lies \
-                 {} image widths away): the view looks nearly straight down or the vanishing \
-                 points cannot be placed, and the focal length cannot be observed from it",
-                if widths.is_finite() {
-                    format!("{widths:.0}")
-                } else {
-                    "infinitely many".to_string()
-                }
+                "the edges across the vehicles are parallel in the image (their VP2 lies {}): \
+                 the camera looks along the road with a long lens, or straight down, and the \
+                 focal length cannot be observed from them",
+                widths_away(widths)
             ));
         }
         out
+    }
+
+    /// The warning of a VP1 that rests on the network's VP1 rays alone (no straight tracks, no
+    /// edgelets along the vehicles, no lines of the scene) while they scatter more than
+    /// [`WEAK_VP1_RAY_SCATTER_DEG`] around it; `None` otherwise.
+    pub fn weak_vp1_warning(&self) -> Option<String> {
+        let e = self.robust_evidence.as_ref()?;
+        let scatter = e.vp1_ray_scatter_deg.filter(|s| {
+            !e.vp1_from_tracks
+                && !e.vp1_from_edgelets
+                && !e.vp1_from_scene_lines
+                && *s > WEAK_VP1_RAY_SCATTER_DEG
+        })?;
+        Some(format!(
+            "VP1 rests on the network's VP1 rays alone ({} vehicles agree, their median angle \
+             to it {scatter:.1}°; no straight vehicle tracks, no lines of the road): the road \
+             direction, and everything measured from it, is weakly supported; use longer \
+             footage of moving traffic",
+            e.vp1_inliers
+        ))
     }
 
     /// The camera of this aggregation for principal point `pp`, with `focal_px` when the
@@ -477,7 +484,9 @@ pub fn aggregate(
                     }
                 }
             );
-            let focal_source = if e.focal_from_edgelets {
+            // The curved-road fit sets the focal length with the horizon (from the tracks'
+            // tangents and the edgelets), whether or not the straight edgelet fit could.
+            let focal_source = if e.focal_from_edgelets || e.curved_fit {
                 FocalSource::Edgelets
             } else if e.rays_trusted {
                 FocalSource::Network
@@ -559,9 +568,16 @@ pub fn aggregate(
                         100.0 * (MEASURED_FOCAL_MODEL_LOG_SD.exp() - 1.0)
                     ));
                 }
+                // Rays that put VP2 at infinity give absurd focal lengths: say so instead.
+                let alone = c.focal_px_data_only;
+                let alone = if alone.is_finite() && alone <= 1000.0 * f64::from(image_size.0) {
+                    format!("{alone:.0} px")
+                } else {
+                    "VP2 at infinity".to_string()
+                };
                 summary.push_str(&format!(
-                    " (VP2 rays alone: {:.0} px), horizon ±{:.2}°",
-                    c.focal_px_data_only, c.horizon_angle_sd_deg
+                    " (VP2 rays alone: {alone}), horizon ±{:.2}°",
+                    c.horizon_angle_sd_deg
                 ));
             }
             let evidence = serde_json::json!({
@@ -601,13 +617,15 @@ pub fn aggregate(
                 "rays_focal_px": e.rays_focal_px,
                 "rays_scatter_deg": e.rays_scatter_deg,
                 "rays_vp2_sd_deg": e.rays_vp2_sd_deg,
-                "rays_posterior_px": e.rays_posterior_px,
+                "rays_focal_posterior_p16_p50_p84_px": e.rays_posterior_px,
                 "focal_from_rays": e.focal_from_rays,
+                "bootstrap_focal_p16_p84_px": r
+                    .confidence
+                    .as_ref()
+                    .map(|c| [c.focal_px_p16, c.focal_px_p84]),
+                "vp2_rays_only_focal_px": r.confidence.as_ref().map(|c| c.focal_px_data_only),
             });
             let confidence = r.confidence.as_ref().map(|c| Confidence {
-                focal_px_p16: c.focal_px_p16,
-                focal_px_p84: c.focal_px_p84,
-                focal_px_vp2_rays_only: c.focal_px_data_only,
                 horizon_angle_sd_deg: c.horizon_angle_sd_deg,
                 vp1_sd_px: c.vp1_sd_px,
                 resamples: c.resamples,
@@ -626,6 +644,17 @@ pub fn aggregate(
                 focal_range_px,
             })
         }
+    }
+}
+
+/// How far a vanishing point lies, in image widths, in words: a number up to a thousand,
+/// beyond that "more than a thousand image widths away" (the difference is no longer
+/// measurable: the edges are parallel).
+pub fn widths_away(widths: f64) -> String {
+    if widths.is_finite() && widths <= 1000.0 {
+        format!("{widths:.0} image widths away")
+    } else {
+        "more than a thousand image widths away, at infinity for all purposes".to_string()
     }
 }
 
@@ -756,8 +785,10 @@ mod tests {
             w[0].contains("assumed") && w[1].contains("parallel"),
             "{w:?}"
         );
+        // An absurd distance is not printed as a number.
+        assert!(w[1].contains("more than a thousand image widths"), "{w:?}");
         let w = with_evidence(FocalSource::Prior, far(f64::INFINITY)).warnings();
-        assert!(w[1].contains("infinitely many"), "{w:?}");
+        assert!(w[1].contains("at infinity"), "{w:?}");
         // A VP2 within reach says nothing of the kind.
         let w = with_evidence(FocalSource::Prior, far(12.0)).warnings();
         assert_eq!(w.len(), 1, "{w:?}");

@@ -6,7 +6,7 @@ use vpcal_geom::camera::Calibration;
 use vpcal_geom::vehicle_scale::{scale_from_vehicles, SizedBox, VehicleScale, PASSENGER_CAR};
 use vpcal_geom::Point2;
 
-use crate::pipeline::PipelineOutput;
+use crate::pipeline::{PipelineOutput, TrackBox};
 
 /// The scale's source name in calibration files.
 pub const SOURCE: &str = "vehicles";
@@ -15,24 +15,36 @@ pub const SOURCE: &str = "vehicles";
 /// box tracker) counted once; `None` with too few vehicles whose boxes fit a car-shaped
 /// cuboid.
 pub fn vehicle_scale(out: &PipelineOutput, cal: &Calibration, seed: u64) -> Option<VehicleScale> {
-    scale_of(out, &sized_boxes(out), cal, seed)
+    let boxes = crate::tracks::record_boxes(&out.records);
+    vehicle_scale_of(&boxes, (out.info.width, out.info.height), cal, seed)
 }
 
-/// The records' detector boxes, each with its track of the box tracker as its group.
-fn sized_boxes(out: &PipelineOutput) -> Vec<SizedBox> {
+/// [`vehicle_scale`] of detector boxes `boxes` (with their frames) in frames of `size`
+/// pixels: a run's records, or those of a file of per-vehicle records.
+pub fn vehicle_scale_of(
+    boxes: &[TrackBox],
+    size: (u32, u32),
+    cal: &Calibration,
+    seed: u64,
+) -> Option<VehicleScale> {
+    scale_of(size, &sized_boxes(boxes), cal, seed)
+}
+
+/// The detector boxes, each with its track of the box tracker as its group.
+fn sized_boxes(boxes: &[TrackBox]) -> Vec<SizedBox> {
     let link = crate::tracks::TrackSettings::default().link;
-    let tracks = crate::tracks::link_boxes(&crate::tracks::record_boxes(&out.records), &link);
-    let mut group = vec![0u64; out.records.len()];
+    let tracks = crate::tracks::link_boxes(boxes, &link);
+    let mut group = vec![0u64; boxes.len()];
     for (t, members) in tracks.iter().enumerate() {
         for &i in members {
             group[i] = t as u64;
         }
     }
-    out.records
+    boxes
         .iter()
         .zip(&group)
-        .map(|(r, g)| SizedBox {
-            bbox: r.det_box,
+        .map(|(b, g)| SizedBox {
+            bbox: b.bbox,
             heading: None,
             group: Some(*g),
         })
@@ -41,7 +53,7 @@ fn sized_boxes(out: &PipelineOutput) -> Vec<SizedBox> {
 
 /// [`vehicle_scale`] with the boxes already grouped.
 fn scale_of(
-    out: &PipelineOutput,
+    size: (u32, u32),
     boxes: &[SizedBox],
     cal: &Calibration,
     seed: u64,
@@ -49,8 +61,8 @@ fn scale_of(
     scale_from_vehicles(
         cal,
         boxes,
-        f64::from(out.info.width),
-        f64::from(out.info.height),
+        f64::from(size.0),
+        f64::from(size.1),
         PASSENGER_CAR,
         seed,
     )
@@ -83,16 +95,17 @@ pub fn with_focal(cal: &Calibration, focal_px: f64) -> Option<Calibration> {
 }
 
 /// The [`FocalSensitivity`] of the automatic scale `scale` of `cal` over `interval_px`, measured
-/// at the median foot point of the run's vehicles: the along distance to the point a tenth of
+/// at the median foot point of the vehicles `track_boxes` (frames of `size` pixels): the along distance to the point a tenth of
 /// the frame height towards VP1, the across distance to the point a tenth of the frame width
 /// along the horizon's direction. `None` when a camera or scale at an end cannot be had.
 pub fn focal_sensitivity(
-    out: &PipelineOutput,
+    track_boxes: &[TrackBox],
+    size: (u32, u32),
     cal: &Calibration,
     scale: &VehicleScale,
     interval_px: [f64; 2],
 ) -> Option<FocalSensitivity> {
-    let boxes = sized_boxes(out);
+    let boxes = sized_boxes(track_boxes);
     let feet: Vec<(f64, f64)> = boxes
         .iter()
         .map(|b| (0.5 * (b.bbox.x0 + b.bbox.x1), b.bbox.y1))
@@ -102,7 +115,7 @@ pub fn focal_sensitivity(
         median(feet.iter().map(|f| f.0).collect())?,
         median(feet.iter().map(|f| f.1).collect())?,
     );
-    let (w, h) = (f64::from(out.info.width), f64::from(out.info.height));
+    let (w, h) = (f64::from(size.0), f64::from(size.1));
     let towards = (cal.vp1 - foot) / (cal.vp1 - foot).norm();
     let along_px = foot + towards * (0.1 * h);
     let horizon_dir = {
@@ -126,7 +139,7 @@ pub fn focal_sensitivity(
     let mut across = [1.0; 2];
     for (k, &f) in interval_px.iter().enumerate() {
         let c = with_focal(cal, f)?;
-        let s = scale_of(out, &boxes, &c, 0)?;
+        let s = scale_of(size, &boxes, &c, 0)?;
         let (a, b) = metres(&c, s.m_per_unit)?;
         along[k] = a / base.0;
         across[k] = b / base.1;

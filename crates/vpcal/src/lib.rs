@@ -9,9 +9,11 @@
 //! - [`aggregate`]: per-vehicle VP pairs to one camera, with a summary and evidence.
 //! - [`output`]: the calibration file, the BrnoCompSpeed system file and vehicle records.
 //! - [`overlay`]: the picture of a calibration (horizon, road grid, vehicle VP directions).
+//! - [`report`]: the self-contained HTML report of a calibration (`calibrate --report`).
 //! - [`model`]: the bundled VP network.
 //! - [`progress`]: progress reports of long work.
 //! - [`road`]: metric measurements on the road plane (scale, road points, distances).
+//! - [`plausible`]: what traffic cameras and road traffic can be (a calibration's status).
 //! - [`label`]: self-labelled training crops from real footage (`vpcal label`).
 //!
 //! The building blocks live in the other crates of the workspace: geometry and aggregation
@@ -27,7 +29,9 @@ pub mod model;
 pub mod output;
 pub mod overlay;
 pub mod pipeline;
+pub mod plausible;
 pub mod progress;
+pub mod report;
 pub mod road;
 pub mod tracks;
 

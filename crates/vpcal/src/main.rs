@@ -8,11 +8,16 @@
 
 mod cmd;
 
+/// The exit codes, for every command's help.
+const EXIT_CODES: &str = "Exit codes: 0 done; 1 an error (bad input, I/O), with its message; 2 a \
+wrong command line; 3 the footage could not support a calibration (calibrate, aggregate, demo).\n\
+Guide: README.md; the calibration file's fields: docs/calibration-file.md.";
+
 use clap::{Parser, Subcommand};
 
 /// Calibrate fixed traffic cameras from the vanishing points of the vehicles they see.
 #[derive(Debug, Parser)]
-#[command(name = "vpcal", version, about, long_about = None)]
+#[command(name = "vpcal", version, about, long_about = None, after_help = EXIT_CODES)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -33,6 +38,8 @@ enum Command {
     Measure(cmd::measure::MeasureArgs),
     /// Export a calibration for other tools (OpenCV FileStorage YAML).
     Export(cmd::measure::ExportArgs),
+    /// Measure saved vehicle tracks again with a calibration (after `vpcal scale`).
+    Speeds(cmd::measure::SpeedsArgs),
     /// Turn per-vehicle VP pairs (a VPout JSON file) into a camera calibration.
     Aggregate(cmd::aggregate::Args),
     /// Training data: preview the augmentation, benchmark the batch pipeline.
@@ -66,6 +73,7 @@ fn main() -> std::process::ExitCode {
         Command::Scale(args) => cmd::measure::run_scale(args),
         Command::Measure(args) => cmd::measure::run_measure(args),
         Command::Export(args) => cmd::measure::run_export(args),
+        Command::Speeds(args) => cmd::measure::run_speeds(args),
         Command::Data(args) => cmd::data::run(args),
         Command::Eval(args) => cmd::eval::run(args),
         Command::Synth(args) => cmd::synth::run(args),

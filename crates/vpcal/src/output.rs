@@ -111,6 +111,10 @@ pub fn aggregated_file(
     file.focal_source = Some(agg.focal_source.name().to_string());
     file.focal_interval_px = agg.focal_interval_px;
     file.warnings = agg.warnings();
+    file.replace_checks(
+        crate::plausible::VP1_CHECK,
+        crate::plausible::check_vp1(agg),
+    );
     file
 }
 
@@ -129,50 +133,116 @@ pub fn calibrated_run_file(
 ) -> Result<(CalibrationFile, Option<f64>)> {
     let mut file = calibration_file(out, config, cal, agg);
     let Some(k) = known else {
-        let Some(auto) = crate::autoscale::vehicle_scale(out, cal, 0) else {
-            return Ok((file, None));
-        };
-        file.set_vehicle_scale(auto.m_per_unit, auto.interval)
-            .map_err(anyhow::Error::msg)?;
-        file.summary = Some(format!(
-            "{}; scale {}",
-            file.summary.as_deref().unwrap_or_default(),
-            crate::autoscale::summary_line(&auto, cal.plane_distance())
-        ));
-        let sensitivity = agg
-            .focal_interval_px
-            .and_then(|iv| crate::autoscale::focal_sensitivity(out, cal, &auto, iv));
-        file.scale_focal_sensitivity = sensitivity;
-        let focal_part = sensitivity.map_or(String::new(), |s| {
-            format!(
-                "; and as good as the focal length: over its 68% interval ({:.0}-{:.0} px) \
-                 distances along the road (and speeds) change by x{:.2}-x{:.2}, across it by \
-                 x{:.2}-x{:.2}",
-                s.focal_px[0],
-                s.focal_px[1],
-                s.along[0].min(s.along[1]),
-                s.along[0].max(s.along[1]),
-                s.across[0].min(s.across[1]),
-                s.across[0].max(s.across[1])
-            )
-        });
-        file.warnings.push(format!(
-            "the metric scale is automatic: the vehicles' sizes read as typical {} x {} x {} m \
-             cars (68% {:.4}-{:.4} m per unit, about ±{:.0} %){focal_part}; give a known road \
-             distance (--scale-points/--scale-distance or `vpcal scale`) for measurements",
-            vpcal_geom::vehicle_scale::PASSENGER_CAR[0],
-            vpcal_geom::vehicle_scale::PASSENGER_CAR[1],
-            vpcal_geom::vehicle_scale::PASSENGER_CAR[2],
-            auto.interval[0],
-            auto.interval[1],
-            50.0 * (auto.interval[1] / auto.interval[0] - 1.0)
-        ));
-        return Ok((file, Some(auto.m_per_unit)));
+        let boxes = crate::tracks::record_boxes(&out.records);
+        let size = (out.info.width, out.info.height);
+        let scale = set_vehicle_scale(&mut file, &boxes, size, cal, agg)?;
+        return Ok((file, scale));
     };
     let (scale, reference) = scale_from_points(cal, k.p1, k.p2, k.distance_m, "--scale-points")?;
     file.set_scale(scale, Some(reference))
         .map_err(anyhow::Error::msg)?;
     Ok((file, Some(scale)))
+}
+
+/// Everything a calibrated run writes: the calibration file (its status after the
+/// plausibility checks), the metric scale, and the tracks with their speeds.
+#[derive(Debug)]
+pub struct CalibratedRun {
+    pub file: CalibrationFile,
+    pub scale: Option<f64>,
+    pub tracks: Vec<VehicleTrack>,
+    pub header: TracksHeader,
+}
+
+/// [`calibrated_run_file`], then the run's tracks (speeds with its scale), and the
+/// plausibility of the camera and the speeds ([`crate::plausible`]) in the file's status
+/// and warnings.
+///
+/// # Errors
+/// As [`calibrated_run_file`].
+pub fn calibrated_run(
+    out: &PipelineOutput,
+    config: &PipelineConfig,
+    cal: &Calibration,
+    agg: &Aggregated,
+    known: Option<KnownDistance>,
+) -> Result<CalibratedRun> {
+    let (mut file, scale) = calibrated_run_file(out, config, cal, agg, known)?;
+    let curved = agg.robust_evidence.as_ref().is_some_and(|e| e.road_curved);
+    let (tracks, mut header) = run_tracks(out, scale.map(|s| (cal, s)), true, curved);
+    if curved && scale.is_some() {
+        header.note = Some("the road curves: tracks without lanes".to_string());
+    }
+    header.speed_factor = Some(crate::plausible::along_factor(&file));
+    let camera = crate::plausible::check_camera(&file);
+    file.replace_checks(crate::plausible::CAMERA_CHECK, camera);
+    let speeds = crate::plausible::check_speeds(&tracks, &file, config.frames.image_fps.is_some());
+    file.replace_checks(crate::plausible::SPEEDS_CHECK, speeds);
+    Ok(CalibratedRun {
+        file,
+        scale,
+        tracks,
+        header,
+    })
+}
+
+/// Give `file` (camera `cal`, aggregated as `agg`) the automatic metric scale from the sizes
+/// of the vehicles `boxes` (frames of `size` pixels), with its summary, its sensitivity to
+/// the focal length and its warning; returns the scale, `None` (the file unchanged) when too
+/// few vehicles fit a car-shaped box.
+///
+/// # Errors
+/// When the file has no camera.
+pub fn set_vehicle_scale(
+    file: &mut CalibrationFile,
+    boxes: &[crate::pipeline::TrackBox],
+    size: (u32, u32),
+    cal: &Calibration,
+    agg: &Aggregated,
+) -> Result<Option<f64>> {
+    let Some(auto) = crate::autoscale::vehicle_scale_of(boxes, size, cal, 0) else {
+        return Ok(None);
+    };
+    file.set_vehicle_scale(auto.m_per_unit, auto.interval)
+        .map_err(anyhow::Error::msg)?;
+    file.summary = Some(format!(
+        "{}{}{}",
+        file.summary.as_deref().unwrap_or_default(),
+        vpcal_formats::calib::SCALE_SUMMARY_SEPARATOR,
+        crate::autoscale::summary_line(&auto, cal.plane_distance())
+    ));
+    // A focal length without an interval (given) moves nothing.
+    let sensitivity = agg
+        .focal_interval_px
+        .filter(|[lo, hi]| hi > lo)
+        .and_then(|iv| crate::autoscale::focal_sensitivity(boxes, size, cal, &auto, iv));
+    file.scale_focal_sensitivity = sensitivity;
+    let focal_part = sensitivity.map_or(String::new(), |s| {
+        format!(
+            "; and as good as the focal length: over its 68% interval ({:.0}-{:.0} px) \
+             distances along the road (and speeds) change by x{:.2}-x{:.2}, across it by \
+             x{:.2}-x{:.2}",
+            s.focal_px[0],
+            s.focal_px[1],
+            s.along[0].min(s.along[1]),
+            s.along[0].max(s.along[1]),
+            s.across[0].min(s.across[1]),
+            s.across[0].max(s.across[1])
+        )
+    });
+    file.warnings.push(format!(
+        "{} the vehicles' sizes read as typical {} x {} x {} m \
+         cars (68% {:.4}-{:.4} m per unit, about ±{:.0} %){focal_part}; give a known road \
+         distance (--scale-points/--scale-distance or `vpcal scale`) for measurements",
+        vpcal_formats::calib::AUTOMATIC_SCALE_WARNING,
+        vpcal_geom::vehicle_scale::PASSENGER_CAR[0],
+        vpcal_geom::vehicle_scale::PASSENGER_CAR[1],
+        vpcal_geom::vehicle_scale::PASSENGER_CAR[2],
+        auto.interval[0],
+        auto.interval[1],
+        50.0 * (auto.interval[1] / auto.interval[0] - 1.0)
+    ));
+    Ok(Some(auto.m_per_unit))
 }
 
 /// How per-vehicle records are aggregated (`vpcal aggregate`'s flags).
@@ -267,7 +337,28 @@ pub fn aggregate_records(
     .with_context(|| format!("aggregating {origin}"))
     .and_then(|agg| agg.into_camera(pp, s.focal_px).map_err(anyhow::Error::msg));
     let mut file = match &result {
-        Ok((cal, agg)) => aggregated_file(input, cal, agg),
+        Ok((cal, agg)) => {
+            let mut file = aggregated_file(input, cal, agg);
+            // The automatic scale `calibrate` gives, from the records' boxes (a file written
+            // by `calibrate --vehicles` holds every box the network saw, as its integer crop
+            // box: the scale can differ from calibrate's by the rounding).
+            let boxes: Vec<crate::pipeline::TrackBox> = items
+                .iter()
+                .filter_map(|it| {
+                    let frame = it.frame_cnt;
+                    (frame.is_finite() && frame >= 0.0).then_some(())?;
+                    Some(crate::pipeline::TrackBox {
+                        // Why: a non-negative whole frame counter.
+                        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                        frame: frame.round() as u64,
+                        bbox: it.box_px()?,
+                        score: it.score as f32,
+                    })
+                })
+                .collect();
+            set_vehicle_scale(&mut file, &boxes, (width, height), cal, agg)?;
+            file
+        }
         Err(e) => CalibrationFile::not_calibrated(input, format!("{e:#}")),
     };
     if let Value::Object(m) = settings {
@@ -332,25 +423,29 @@ pub fn write_bcs_system_with_tracks(
     cal: &Calibration,
     scale: Option<f64>,
     tracks: &[VehicleTrack],
-    min_points: usize,
+    header: &TracksHeader,
 ) -> Result<usize> {
     let mut system = bcs_system(cal, scale);
-    system.cars = bcs_cars(tracks, min_points);
+    system.cars = bcs_cars(tracks, header);
     let n = system.cars.len();
     write_system(path, &system)?;
     Ok(n)
 }
 
-/// The BrnoCompSpeed `cars` of `tracks`: those with at least `min_points` (and at least one)
-/// unclipped points ([`write_bcs_system_with_tracks`]), and, where a track has a speed, whose
-/// speed is known to [`crate::tracks::BCS_MAX_SPEED_REL_UNCERTAINTY`] of itself.
-pub fn bcs_cars(tracks: &[VehicleTrack], min_points: usize) -> Vec<SystemCar> {
+/// The BrnoCompSpeed `cars` of `tracks`: those with at least a speed window
+/// (`header.window_points`, and at least one) of unclipped points
+/// ([`write_bcs_system_with_tracks`]), and, where a track has a speed, whose speed is known
+/// to [`crate::tracks::BCS_MAX_SPEED_REL_UNCERTAINTY`] of itself and is possible for a road
+/// vehicle ([`crate::plausible::impossible_speed`] with `header.speed_factor`).
+pub fn bcs_cars(tracks: &[VehicleTrack], header: &TracksHeader) -> Vec<SystemCar> {
+    let min_points = header.window_points;
+    let factor = header.speed_factor.unwrap_or([1.0, 1.0]);
     tracks
         .iter()
         .filter(|t| {
             t.speed.is_none_or(|s| {
                 s.uncertainty_kmh <= crate::tracks::BCS_MAX_SPEED_REL_UNCERTAINTY * s.kmh.abs()
-            })
+            }) && !crate::plausible::impossible_speed(t, factor)
         })
         .map(VehicleTrack::to_system_car)
         .filter(|c| !c.frames.is_empty() && c.frames.len() >= min_points)
@@ -368,6 +463,10 @@ pub struct TracksHeader {
     pub window_points: usize,
     /// Why speeds are missing, when they are.
     pub note: Option<String>,
+    /// How far the calibration can put distances along the road, and so speeds, off: the
+    /// factor range `[lo, hi]` (68 %, [`crate::plausible::along_factor`]); `None` when not
+    /// known.
+    pub speed_factor: Option<[f64; 2]>,
 }
 
 /// A finite number, or JSON null.
@@ -412,6 +511,12 @@ pub fn tracks_json(header: &TracksHeader, tracks: &[VehicleTrack]) -> Value {
                 "road_y_m": road(1),
                 "speed_kmh": t.speed.map_or(Value::Null, |s| num(s.kmh)),
                 "speed_uncertainty_kmh": t.speed.map_or(Value::Null, |s| num(s.uncertainty_kmh)),
+                "speed_calibration_uncertainty_kmh": t.speed.map_or(Value::Null, |s| {
+                    calibration_uncertainty_kmh(s.kmh, header.speed_factor).map_or(Value::Null, num)
+                }),
+                "speed_possible": t.speed.map(|_| {
+                    !crate::plausible::impossible_speed(t, header.speed_factor.unwrap_or([1.0, 1.0]))
+                }),
                 "speed_fit_kmh": t.speed.map_or(Value::Null, |s| num(s.fit_kmh)),
                 "speed_windows": t.speed.map_or(0, |s| s.windows),
                 "lateral_m": t.lateral_m.map_or(Value::Null, num),
@@ -428,25 +533,36 @@ pub fn tracks_json(header: &TracksHeader, tracks: &[VehicleTrack]) -> Value {
         "height": header.size.1,
         "scale_m_per_unit": header.scale_m_per_unit.map_or(Value::Null, num),
         "speed_window_points": header.window_points,
+        "speed_calibration_factor": header.speed_factor,
         "note": header.note,
         "tracks": list,
     })
 }
 
+/// The part of a speed `kmh` that the calibration leaves open (half the width of its 68 %
+/// range from the along-road factor `factor`), km/h; `None` without a factor.
+pub fn calibration_uncertainty_kmh(kmh: f64, factor: Option<[f64; 2]>) -> Option<f64> {
+    factor.map(|[lo, hi]| 0.5 * kmh.abs() * (hi - lo))
+}
+
 /// The tracks as CSV: one row per track point, the track's speed columns repeated on each.
-pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
+pub fn tracks_csv(header: &TracksHeader, tracks: &[VehicleTrack]) -> String {
     let opt = |v: Option<f64>| {
         v.filter(|x| x.is_finite())
             .map_or(String::new(), |x| format!("{x}"))
     };
+    let factor = header.speed_factor.unwrap_or([1.0, 1.0]);
     let mut s = String::from(
         "id,frame,time_s,x_px,y_px,clipped,road_x_m,road_y_m,speed_kmh,speed_uncertainty_kmh,\
-         speed_fit_kmh,lateral_m,lane,direction\n",
+         speed_calibration_uncertainty_kmh,speed_possible,speed_fit_kmh,lateral_m,lane,direction\n",
     );
     for t in tracks {
+        let possible = t.speed.map_or(String::new(), |_| {
+            u8::from(!crate::plausible::impossible_speed(t, factor)).to_string()
+        });
         for p in &t.points {
             s.push_str(&format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 t.id,
                 p.frame,
                 opt(Some(p.time_s)),
@@ -457,6 +573,10 @@ pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
                 opt(p.road_m.map(|q| q[1])),
                 opt(t.speed.map(|v| v.kmh)),
                 opt(t.speed.map(|v| v.uncertainty_kmh)),
+                opt(t
+                    .speed
+                    .and_then(|v| calibration_uncertainty_kmh(v.kmh, header.speed_factor))),
+                possible,
                 opt(t.speed.map(|v| v.fit_kmh)),
                 opt(t.lateral_m),
                 t.lane.map_or(String::new(), |l| l.to_string()),
@@ -467,13 +587,18 @@ pub fn tracks_csv(tracks: &[VehicleTrack]) -> String {
     s
 }
 
-/// The tracks of a run, and why they have no speeds when they have none.
+/// The tracks of a run (no lanes on a curved road), and why they have no speeds when they
+/// have none.
 pub fn run_tracks(
     out: &PipelineOutput,
     road: Option<(&Calibration, f64)>,
     calibrated: bool,
+    curved_road: bool,
 ) -> (Vec<VehicleTrack>, TracksHeader) {
-    let settings = TrackSettings::default();
+    let settings = TrackSettings {
+        lanes: !curved_road,
+        ..TrackSettings::default()
+    };
     let mut header = TracksHeader {
         input: out.info.path.display().to_string(),
         fps: out.info.fps.filter(|f| f.is_finite() && *f > 0.0),
@@ -481,6 +606,7 @@ pub fn run_tracks(
         scale_m_per_unit: road.map(|r| r.1),
         window_points: settings.window_points,
         note: None,
+        speed_factor: None,
     };
     let Some(fps) = header.fps else {
         header.note = Some(
@@ -536,6 +662,154 @@ pub fn tracks_line(tracks: &[VehicleTrack], header: &TracksHeader) -> String {
     line
 }
 
+/// Tracks read back from a tracks file (`calibrate --tracks`): what they were measured on,
+/// and each track's points (frames, times, contact points, clipped flags; no road points).
+#[derive(Debug, Clone)]
+pub struct SavedTracks {
+    pub input: Option<String>,
+    pub fps: Option<f64>,
+    /// `(width, height)` of the frames (JSON files).
+    pub size: Option<(u32, u32)>,
+    pub tracks: Vec<Vec<crate::tracks::TrackPoint>>,
+}
+
+/// Read a tracks file written by `calibrate --tracks`: CSV (by the `.csv` extension) or JSON
+/// (`vpcal-tracks/1`).
+///
+/// # Errors
+/// An unreadable file, or one that is not a tracks file (the message names the field, row or
+/// column).
+pub fn read_tracks(path: &Path) -> Result<SavedTracks> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", path.display()))?;
+    let csv = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    let parsed = if csv {
+        tracks_from_csv(&text)
+    } else {
+        tracks_from_json(&text)
+    };
+    parsed.map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
+
+fn tracks_from_csv(text: &str) -> Result<SavedTracks, String> {
+    let mut lines = text.lines();
+    let head: Vec<&str> = lines
+        .next()
+        .ok_or("empty file: expected the header of a tracks CSV")?
+        .split(',')
+        .map(str::trim)
+        .collect();
+    let col = |name: &str| {
+        head.iter().position(|h| *h == name).ok_or(format!(
+            "no column {name:?}: not a tracks CSV written by `vpcal calibrate --tracks`"
+        ))
+    };
+    let [id, frame, time, x, y, clipped] =
+        ["id", "frame", "time_s", "x_px", "y_px", "clipped"].map(col);
+    let (id, frame, time, x, y, clipped) = (id?, frame?, time?, x?, y?, clipped?);
+    let mut tracks: Vec<(String, Vec<crate::tracks::TrackPoint>)> = Vec::new();
+    for (n, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let row: Vec<&str> = line.split(',').collect();
+        let field = |i: usize, name: &str| -> Result<f64, String> {
+            row.get(i)
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+                .ok_or(format!(
+                    "row {}: column {name:?} must be a number, found {:?}",
+                    n + 2,
+                    row.get(i).copied().unwrap_or("")
+                ))
+        };
+        let key = row.get(id).map_or(String::new(), |v| v.trim().to_string());
+        let point = crate::tracks::TrackPoint {
+            // Why: frame indices are whole, non-negative numbers in the file.
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            frame: field(frame, "frame")?.max(0.0) as u64,
+            time_s: field(time, "time_s")?,
+            image: vpcal_geom::Point2::new(field(x, "x_px")?, field(y, "y_px")?),
+            clipped: field(clipped, "clipped")? != 0.0,
+            road_m: None,
+        };
+        match tracks.last_mut() {
+            Some((k, points)) if *k == key => points.push(point),
+            _ => tracks.push((key, vec![point])),
+        }
+    }
+    Ok(SavedTracks {
+        input: None,
+        fps: None,
+        size: None,
+        tracks: tracks.into_iter().map(|(_, p)| p).collect(),
+    })
+}
+
+fn tracks_from_json(text: &str) -> Result<SavedTracks, String> {
+    let doc: Value = serde_json::from_str(text).map_err(|e| format!("not a JSON document: {e}"))?;
+    match doc.get("format").and_then(Value::as_str) {
+        Some("vpcal-tracks/1") => {}
+        other => {
+            return Err(format!(
+                "field \"format\" is {other:?}: expected \"vpcal-tracks/1\" (a file written by \
+                 `vpcal calibrate --tracks`)"
+            ))
+        }
+    }
+    let list = doc
+        .get("tracks")
+        .and_then(Value::as_array)
+        .ok_or("field \"tracks\" must be a list")?;
+    let mut tracks = Vec::new();
+    for (k, t) in list.iter().enumerate() {
+        let numbers = |name: &str| -> Result<Vec<f64>, String> {
+            t.get(name)
+                .and_then(Value::as_array)
+                .and_then(|a| a.iter().map(Value::as_f64).collect::<Option<Vec<f64>>>())
+                .ok_or(format!("tracks[{k}].{name} must be a list of numbers"))
+        };
+        let frames = numbers("frames")?;
+        let times = numbers("time_s")?;
+        let xs = numbers("x_px")?;
+        let ys = numbers("y_px")?;
+        let clipped: Vec<bool> = t
+            .get("clipped")
+            .and_then(Value::as_array)
+            .and_then(|a| a.iter().map(Value::as_bool).collect::<Option<Vec<bool>>>())
+            .ok_or(format!("tracks[{k}].clipped must be a list of true/false"))?;
+        let n = frames.len();
+        if [times.len(), xs.len(), ys.len(), clipped.len()] != [n; 4] {
+            return Err(format!(
+                "tracks[{k}]: frames, time_s, x_px, y_px and clipped must be equally long"
+            ));
+        }
+        tracks.push(
+            (0..n)
+                .map(|i| crate::tracks::TrackPoint {
+                    // Why: frame indices are whole, non-negative numbers in the file.
+                    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                    frame: frames[i].max(0.0) as u64,
+                    time_s: times[i],
+                    image: vpcal_geom::Point2::new(xs[i], ys[i]),
+                    clipped: clipped[i],
+                    road_m: None,
+                })
+                .collect(),
+        );
+    }
+    let size = doc
+        .get("width")
+        .and_then(Value::as_u64)
+        .zip(doc.get("height").and_then(Value::as_u64))
+        .and_then(|(w, h)| Some((u32::try_from(w).ok()?, u32::try_from(h).ok()?)));
+    Ok(SavedTracks {
+        input: doc.get("input").and_then(Value::as_str).map(str::to_string),
+        fps: doc.get("fps").and_then(Value::as_f64),
+        size,
+        tracks,
+    })
+}
+
 /// Write the tracks to `path`: CSV when it ends in `.csv`, else JSON (atomically).
 ///
 /// # Errors
@@ -545,7 +819,7 @@ pub fn write_tracks(path: &Path, header: &TracksHeader, tracks: &[VehicleTrack])
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
     let bytes = if csv {
-        tracks_csv(tracks).into_bytes()
+        tracks_csv(header, tracks).into_bytes()
     } else {
         let mut b = serde_json::to_vec_pretty(&tracks_json(header, tracks))?;
         b.push(b'\n');
@@ -583,6 +857,67 @@ pub fn write_vehicles(path: &Path, out: &PipelineOutput) -> Result<()> {
 /// The file cannot be written.
 pub fn write_scene(path: &Path, out: &PipelineOutput) -> Result<()> {
     write_scene_edgelets(path, &out.scene_edgelets)?;
+    Ok(())
+}
+
+/// `path` made absolute with its folder's symbolic links resolved (the file itself need not
+/// exist); `None` when its folder does not exist.
+fn resolved(path: &Path) -> Option<std::path::PathBuf> {
+    if let Ok(p) = path.canonicalize() {
+        return Some(p);
+    }
+    let name = path.file_name()?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    Some(dir.canonicalize().ok()?.join(name))
+}
+
+/// Outputs that would overwrite an input or each other: each output (flag, path) must differ
+/// from every input (flag or role, path) and from every other output, and no picture may be
+/// written into an input folder of pictures (it would become a frame of the next run).
+///
+/// # Errors
+/// A message naming both flags and the path.
+pub fn check_distinct_paths(
+    inputs: &[(&str, &Path)],
+    outputs: &[(&str, &Path)],
+) -> Result<(), String> {
+    let ins: Vec<(&str, &Path, Option<std::path::PathBuf>)> =
+        inputs.iter().map(|(f, p)| (*f, *p, resolved(p))).collect();
+    let outs: Vec<(&str, &Path, Option<std::path::PathBuf>)> =
+        outputs.iter().map(|(f, p)| (*f, *p, resolved(p))).collect();
+    for (i, (flag, path, r)) in outs.iter().enumerate() {
+        let Some(r) = r else { continue };
+        for (what, input, ri) in &ins {
+            let Some(ri) = ri else { continue };
+            if r == ri {
+                return Err(format!(
+                    "{flag} {}: is the {what}; it would be overwritten (give another file name)",
+                    path.display()
+                ));
+            }
+            if ri.is_dir() && r.starts_with(ri) && vpcal_video::source::is_image_path(r) {
+                return Err(format!(
+                    "{flag} {}: a picture inside the input folder {}, which would read it as a \
+                     frame next time (write it elsewhere)",
+                    path.display(),
+                    input.display()
+                ));
+            }
+        }
+        for (other, other_path, ro) in &outs[..i] {
+            if ro.as_ref() == Some(r) {
+                return Err(format!(
+                    "{flag} {} and {other} {}: the same file; one output would replace the \
+                     other (give two file names)",
+                    path.display(),
+                    other_path.display()
+                ));
+            }
+        }
+    }
     Ok(())
 }
 
@@ -628,7 +963,7 @@ pub fn check_destination(flag: &str, path: &Path) -> Result<()> {
 mod tests {
     use super::*;
     use crate::tracks::TrackPoint;
-    use vpcal_geom::{BoxPx, Point2};
+    use vpcal_geom::Point2;
 
     /// A track of `n` points of which the first `clipped` touch the border.
     fn track(id: u64, n: u64, clipped: u64) -> VehicleTrack {
@@ -639,7 +974,6 @@ mod tests {
                     frame: f,
                     time_s: f as f64 / 25.0,
                     image: Point2::new(10.0 + f as f64, 50.0),
-                    box_px: BoxPx::new(0.0, 0.0, 1.0, 1.0),
                     clipped: f < clipped,
                     road_m: None,
                 })
@@ -652,6 +986,18 @@ mod tests {
         }
     }
 
+    fn header(window_points: usize) -> TracksHeader {
+        TracksHeader {
+            input: "clip.mp4".into(),
+            fps: Some(25.0),
+            size: (640, 480),
+            scale_m_per_unit: Some(0.05),
+            window_points,
+            note: None,
+            speed_factor: Some([0.9, 1.1]),
+        }
+    }
+
     #[test]
     fn bcs_cars_are_the_tracks_with_a_speed_window_of_unclipped_points() {
         let tracks = [
@@ -660,26 +1006,47 @@ mod tests {
             track(3, 14, 5),
             track(4, 15, 5),
         ];
-        let cars = bcs_cars(&tracks, 10);
+        let cars = bcs_cars(&tracks, &header(10));
         let ids: Vec<i64> = cars.iter().map(|c| c.id).collect();
         assert_eq!(ids, vec![2, 4]);
         // Only the unclipped points are the car's.
         assert_eq!(cars[1].frames.first(), Some(&5.0));
         assert_eq!(cars[1].pos_x.len(), 10);
         // A limit of 0 still leaves out a track with no unclipped point.
-        assert_eq!(bcs_cars(&[track(5, 3, 3)], 0).len(), 0);
+        assert_eq!(bcs_cars(&[track(5, 3, 3)], &header(0)).len(), 0);
         // A speed known to 10 % of itself is written, one known to 12 % is not.
-        let with_speed = |id, uncertainty_kmh| VehicleTrack {
+        let with_speed = |id, kmh, uncertainty_kmh| VehicleTrack {
             speed: Some(crate::tracks::SpeedEstimate {
-                kmh: 100.0,
+                kmh,
                 uncertainty_kmh,
-                fit_kmh: 100.0,
+                fit_kmh: kmh,
                 windows: 5,
             }),
             ..track(id, 20, 0)
         };
-        let cars = bcs_cars(&[with_speed(6, 10.0), with_speed(7, 12.0)], 10);
+        let cars = bcs_cars(
+            &[with_speed(6, 100.0, 10.0), with_speed(7, 100.0, 12.0)],
+            &header(10),
+        );
         let ids: Vec<i64> = cars.iter().map(|c| c.id).collect();
         assert_eq!(ids, vec![6]);
+        // A speed no road vehicle drives, even at the low end of the calibration's factor,
+        // is not a car; one that the factor can bring down to a possible speed is.
+        let cars = bcs_cars(
+            &[with_speed(8, 1418.0, 5.0), with_speed(9, 320.0, 5.0)],
+            &header(10),
+        );
+        let ids: Vec<i64> = cars.iter().map(|c| c.id).collect();
+        assert_eq!(ids, vec![9]);
+        // The CSV says which speeds are possible and the calibration's part of each.
+        let csv = tracks_csv(&header(10), &[with_speed(8, 1418.0, 5.0)]);
+        let first = csv.lines().nth(1).unwrap();
+        let cols: Vec<&str> = first.split(',').collect();
+        assert_eq!(cols[9], "5");
+        assert!(
+            (cols[10].parse::<f64>().unwrap() - 141.8).abs() < 1e-9,
+            "{first}"
+        );
+        assert_eq!(cols[11], "0");
     }
 }

@@ -187,8 +187,9 @@ impl PipelineConfig {
     }
 }
 
-/// Open `input` with frame selection `options`, checked: a bad selection, or a frame rate
-/// for a video (which has its own), is an error naming the flag.
+/// Open `input` with frame selection `options`, checked (a bad selection is an error naming
+/// the flag). A frame rate (`--fps`) makes an image folder a frame sequence, and times a
+/// video's frames at that rate instead of the one its container states.
 ///
 /// # Errors
 /// The selection's or the source's error, naming the input.
@@ -196,15 +197,14 @@ pub fn open_input(input: &Path, options: &SourceOptions) -> Result<Box<dyn Frame
     options
         .validate()
         .map_err(|e| anyhow::anyhow!("invalid frame selection: {e}"))?;
-    let source = vpcal_video::open_source(input, options)
-        .with_context(|| format!("opening {}", input.display()))?;
-    if options.image_fps.is_some() && source.info().kind == SourceKind::Video {
-        bail!(
-            "--fps applies to image folders; the video {} has its own frame rate",
-            input.display()
-        );
+    // The source's errors name the input.
+    let source = vpcal_video::open_source(input, options)?;
+    match options.image_fps {
+        Some(fps) if source.info().kind == SourceKind::Video => {
+            Ok(vpcal_video::source::with_frame_rate(source, fps).0)
+        }
+        _ => Ok(source),
     }
-    Ok(source)
 }
 
 /// A detector box that may belong to a moving vehicle: kept for the network, or dropped only

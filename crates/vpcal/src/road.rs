@@ -28,6 +28,8 @@ impl RoadCamera {
             .camera()
             .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
         let scale = file.scale().map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
+        file.check_consistency()
+            .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
         Ok(RoadCamera { file, cal, scale })
     }
 
@@ -63,6 +65,40 @@ impl RoadCamera {
         self.cal.road_point(p).map(|q| [q[0] * s, q[1] * s])
     }
 
+    /// Whether pixel `p` can be measured: inside the frame (`image_size`) and below the
+    /// horizon. `Ok` holds how many pixels below the horizon it is; `what` names it in the
+    /// error.
+    ///
+    /// # Errors
+    /// A pixel outside the frame, on or above the horizon.
+    pub fn check_measurable(&self, p: Point2, what: &str) -> Result<f64> {
+        let [w, h] = self.file.image_size;
+        let (w, h) = (f64::from(w), f64::from(h));
+        if w > 0.0 && h > 0.0 && !(p.x >= 0.0 && p.x <= w && p.y >= 0.0 && p.y <= h) {
+            bail!(
+                "{what} ({:.1}, {:.1}) is outside the {w:.0}x{h:.0} frame the calibration was made \
+                 for: give pixels of that frame",
+                p.x,
+                p.y
+            );
+        }
+        // On the road's side of the horizon (`sees_road`), its distance from the horizon.
+        let below = self
+            .cal
+            .horizon
+            .signed_distance(p)
+            .map_or(f64::NAN, f64::abs);
+        if !self.cal.sees_road(p) || below.is_nan() || below <= 0.0 {
+            bail!(
+                "{what} ({:.1}, {:.1}) is on or above the horizon: it does not see the road, so \
+                 it has no place on it (give pixels on the road surface)",
+                p.x,
+                p.y
+            );
+        }
+        Ok(below)
+    }
+
     /// Fit the metric scale of `inputs` (as `vpcal scale`: [`fit_scale`]) and put it into the
     /// file: the scale, the first known distance as its reference, and its source. `flag_of`
     /// names measurement `i` in errors; `origin` the file.
@@ -87,7 +123,27 @@ impl RoadCamera {
             .set_scale(fit.scale, reference)
             .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
         self.file.scale_source = Some(fit.source.to_string());
+        if let Some(summary) = &mut self.file.summary {
+            summary.push_str(&format!(
+                "{}{:.4} m per unit from {} known {} ({})",
+                vpcal_formats::calib::SCALE_SUMMARY_SEPARATOR,
+                fit.scale,
+                inputs.len(),
+                if inputs.len() == 1 {
+                    "length"
+                } else {
+                    "lengths"
+                },
+                fit.source
+            ));
+        }
         self.scale = Some(fit.scale);
+        // The camera's height follows the scale: check it again. (A failed check of the
+        // speeds `calibrate` measured with the old scale stays: `vpcal speeds` measures the
+        // tracks again with the new one and says whether they pass.)
+        let camera = crate::plausible::check_camera(&self.file);
+        self.file
+            .replace_checks(crate::plausible::CAMERA_CHECK, camera);
         Ok(fit)
     }
 
@@ -98,6 +154,11 @@ impl RoadCamera {
         self.cal.pixel_of_road_point([q[0] / s, q[1] / s])
     }
 }
+
+/// Pixels closer than this below the horizon are measured with a warning: there a pixel's
+/// error of 1 px moves its distance from the camera by more than `1 / NEAR_HORIZON_PX`
+/// (5 %), since that distance grows as the inverse of the pixel's height below the horizon.
+pub const NEAR_HORIZON_PX: f64 = 20.0;
 
 /// The metric scale that makes the road distance between pixels `p1` and `p2` equal
 /// `distance_m`, with its reference for the calibration file. `flag` names the option the

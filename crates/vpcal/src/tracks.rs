@@ -51,9 +51,11 @@
 //!   of travel (the line through its first and last thirds), a least-squares line of that
 //!   distance against time is fitted over every window of [`TrackSettings::window_points`]
 //!   consecutive points, and the speed is the median of the windows' slopes (robust to box
-//!   jitter and to a few bad boxes). Its uncertainty is the standard error of that median from
-//!   the spread of the window speeds: `1.4826 · MAD / sqrt(n_independent)`, with
-//!   `n_independent = points / window_points` (overlapping windows are not independent). The
+//!   jitter and to a few bad boxes). Its uncertainty is the standard error of that median:
+//!   `max(1.4826 · MAD of the window speeds, median of the windows' own slope errors) /
+//!   sqrt(n_independent)`, with `n_independent = points / window_points` (overlapping windows
+//!   are not independent; a single window has no spread, only its residuals), combined with
+//!   the pixel grid's part ([`pixel_speed_floor_kmh`]), so it is never zero. The
 //!   fit over the whole track is reported too (`speed_fit_kmh`); the two differ when the
 //!   vehicle accelerates.
 //! - **Size**: not estimated. [`vpcal_geom::vehicle_dims`] fits a cuboid to a track's boxes
@@ -62,7 +64,10 @@
 //!   spread from 0.4 to 40 m, so tracks do not report it.
 //! - **Lane** ([`cluster_lanes`]): the vehicles' lateral positions (`lateral_m`, the median
 //!   road y of their contact points) cluster around the lanes; lanes are the modes of their
-//!   density, numbered 1, 2, ... in the order of the road frame's y. The lane markings are not
+//!   density, found for each direction of travel on its own (two carriageways are not one set
+//!   of lanes), numbered 1, 2, ... in the order of the road frame's y. A track farther than
+//!   a lane spacing from every lane is in none; on a curved road there are no lanes (the
+//!   straight road frame's y is not a distance across a curve). The lane markings are not
 //!   seen: a lane no vehicle drove in is not counted, and lanes closer than
 //!   [`MIN_LANE_SPACING_M`] are one.
 //! - **Direction**: `towards_vp1` when the vehicle drives towards VP1 (road x grows),
@@ -88,6 +93,9 @@ pub struct TrackSettings {
     pub border_px: f64,
     /// When the pieces of one vehicle's track are joined.
     pub stitch: StitchSettings,
+    /// Cluster the tracks into lanes (off on a curved road, where distances across a
+    /// straight road frame are no lanes).
+    pub lanes: bool,
 }
 
 /// When [`stitch`] joins two track pieces: the later one starts within `max_gap_s` after the
@@ -139,6 +147,7 @@ impl Default for TrackSettings {
             window_points: 10,
             border_px: 2.0,
             stitch: StitchSettings::default(),
+            lanes: true,
         }
     }
 }
@@ -152,8 +161,6 @@ pub struct TrackPoint {
     pub time_s: f64,
     /// The contact point (box bottom centre), frame pixels.
     pub image: Point2,
-    /// The detector's box.
-    pub box_px: BoxPx,
     /// The box touches the image border: `image` is not the contact point.
     pub clipped: bool,
     /// Road-frame point under `image`, metres (with a scale, for unclipped points).
@@ -165,7 +172,8 @@ pub struct TrackPoint {
 pub struct SpeedEstimate {
     /// Median of the window speeds, km/h.
     pub kmh: f64,
-    /// Standard error of `kmh` from the spread of the window speeds, km/h.
+    /// Standard error of `kmh` (the window speeds' spread, their residuals and the pixel grid;
+    /// module docs), km/h: never zero for a measured track.
     pub uncertainty_kmh: f64,
     /// Slope of one line fitted to the whole track, km/h.
     pub fit_kmh: f64,
@@ -276,18 +284,21 @@ pub fn cluster_lanes(lateral_m: &[f64], support: &[bool]) -> Vec<Option<usize>> 
         }
     }
     modes.sort_by(f64::total_cmp);
+    // A position farther than a lane spacing from every lane (a short track off the road's
+    // lanes, a bad contact point) is in none: it is not stretched into the nearest.
     lateral_m
         .iter()
         .map(|v| {
-            v.is_finite().then(|| {
-                let mut best = 0;
-                for (k, m) in modes.iter().enumerate() {
-                    if (m - v).abs() < (modes[best] - v).abs() {
-                        best = k;
-                    }
+            if !v.is_finite() || modes.is_empty() {
+                return None;
+            }
+            let mut best = 0;
+            for (k, m) in modes.iter().enumerate() {
+                if (m - v).abs() < (modes[best] - v).abs() {
+                    best = k;
                 }
-                best + 1
-            })
+            }
+            ((modes[best] - v).abs() < MIN_LANE_SPACING_M).then_some(best + 1)
         })
         .collect()
 }
@@ -374,7 +385,6 @@ pub fn build_tracks(
                         frame: r.frame,
                         time_s: r.frame as f64 / fps,
                         image,
-                        box_px: b,
                         clipped,
                         road_m,
                     }
@@ -389,6 +399,47 @@ pub fn build_tracks(
             .collect();
         pieces = stitch(pieces, &settings.stitch);
     }
+    measure_tracks(pieces, road, settings)
+}
+
+/// Tracks saved by an earlier run (their points' frames, times, contact points and clipped
+/// flags), measured again with camera and scale `road`: road points, speeds, paths, lanes,
+/// directions ([`measure_tracks`]). The pieces stay as they were linked and stitched.
+pub fn remeasure_tracks(
+    saved: Vec<Vec<TrackPoint>>,
+    road: (&Calibration, f64),
+    settings: &TrackSettings,
+) -> Vec<VehicleTrack> {
+    let (cal, scale) = road;
+    let pieces = saved
+        .into_iter()
+        .map(|points| {
+            points
+                .into_iter()
+                .map(|p| TrackPoint {
+                    road_m: if p.clipped {
+                        None
+                    } else {
+                        cal.road_point(p.image)
+                            .map(|q| [q[0] * scale, q[1] * scale])
+                    },
+                    ..p
+                })
+                .collect()
+        })
+        .collect();
+    measure_tracks(pieces, Some(road), settings)
+}
+
+/// The tracks of linked (and, with a camera, stitched) `pieces`: those of at least
+/// [`TrackSettings::min_points`] points, numbered in the order of their first frames, with
+/// their speeds, paths, lateral positions and directions when `road` gives a camera and
+/// scale, and the lanes they drove in.
+fn measure_tracks(
+    mut pieces: Vec<Vec<TrackPoint>>,
+    road: Option<(&Calibration, f64)>,
+    settings: &TrackSettings,
+) -> Vec<VehicleTrack> {
     pieces.retain(|t| t.len() >= settings.min_points.max(1));
     pieces.sort_by_key(|t| t[0].frame);
     let mut tracks: Vec<VehicleTrack> = pieces
@@ -417,9 +468,23 @@ pub fn build_tracks(
                     })
                     .unwrap_or_default()
             });
+            let speed = estimate_speed(&times, &pos, settings.window_points).map(|mut v| {
+                // The pixel grid's part, which a track of perfectly consistent points (its
+                // residuals and window spread both 0) still has.
+                let floor = metres_per_px(&points).map_or(0.0, |mpp| {
+                    pixel_speed_floor_kmh(
+                        mpp,
+                        times.len(),
+                        times.last().copied().unwrap_or(0.0)
+                            - times.first().copied().unwrap_or(0.0),
+                    )
+                });
+                v.uncertainty_kmh = v.uncertainty_kmh.hypot(floor);
+                v
+            });
             VehicleTrack {
                 id: k as u64 + 1,
-                speed: estimate_speed(&times, &pos, settings.window_points),
+                speed,
                 lateral_m,
                 lane: None,
                 towards_vp1,
@@ -428,17 +493,51 @@ pub fn build_tracks(
             }
         })
         .collect();
-    // The lanes are where the tracks with a speed (long and moving) drove.
-    let lateral: Vec<f64> = tracks
-        .iter()
-        .map(|t| t.lateral_m.unwrap_or(f64::NAN))
-        .collect();
-    let support: Vec<bool> = tracks.iter().map(|t| t.speed.is_some()).collect();
-    let lanes = cluster_lanes(&lateral, &support);
-    for (t, lane) in tracks.iter_mut().zip(lanes) {
-        t.lane = lane;
+    if settings.lanes {
+        let lanes = lanes_by_direction(&tracks);
+        for (t, lane) in tracks.iter_mut().zip(lanes) {
+            t.lane = lane;
+        }
     }
     tracks
+}
+
+/// The lane of each track: the lanes are where the tracks with a speed (long and moving)
+/// drove, clustered ([`cluster_lanes`]) separately for each direction of travel (the two
+/// carriageways of a road are not one set of lanes), then numbered 1, 2, ... across the road
+/// in the order of the lanes' mean lateral positions.
+fn lanes_by_direction(tracks: &[VehicleTrack]) -> Vec<Option<usize>> {
+    let mut lane_of: Vec<Option<(usize, usize)>> = vec![None; tracks.len()];
+    let mut centres: Vec<((usize, usize), f64)> = Vec::new();
+    for (d, direction) in [Some(true), Some(false), None].into_iter().enumerate() {
+        let members: Vec<usize> = (0..tracks.len())
+            .filter(|&i| tracks[i].towards_vp1 == direction)
+            .collect();
+        let lateral: Vec<f64> = members
+            .iter()
+            .map(|&i| tracks[i].lateral_m.unwrap_or(f64::NAN))
+            .collect();
+        let support: Vec<bool> = members.iter().map(|&i| tracks[i].speed.is_some()).collect();
+        let lanes = cluster_lanes(&lateral, &support);
+        let mut sums: std::collections::BTreeMap<usize, (f64, usize)> = Default::default();
+        for ((&i, lane), x) in members.iter().zip(lanes).zip(&lateral) {
+            if let Some(l) = lane {
+                lane_of[i] = Some((d, l));
+                let e = sums.entry(l).or_insert((0.0, 0));
+                e.0 += x;
+                e.1 += 1;
+            }
+        }
+        centres.extend(sums.into_iter().map(|(l, (s, n))| ((d, l), s / n as f64)));
+    }
+    centres.sort_by(|a, b| a.1.total_cmp(&b.1));
+    lane_of
+        .iter()
+        .map(|k| {
+            let k = (*k)?;
+            centres.iter().position(|(c, _)| *c == k).map(|p| p + 1)
+        })
+        .collect()
 }
 
 /// Where a piece of track is at its start and end on the road: the mean time and road point
@@ -677,23 +776,76 @@ pub fn estimate_speed(times: &[f64], pos: &[[f64; 2]], window: usize) -> Option<
     }
     let d = along_track(&pos[..n])?;
     let t = &times[..n];
-    let speeds: Vec<f64> = (0..=n - window)
-        .filter_map(|i| slope(&t[i..i + window], &d[i..i + window]))
-        .map(|v| v.abs() * 3.6)
+    let fits: Vec<(f64, f64)> = (0..=n - window)
+        .filter_map(|i| window_fit(&t[i..i + window], &d[i..i + window]))
+        .map(|(v, se)| (v.abs() * 3.6, se * 3.6))
         .collect();
-    if speeds.is_empty() {
+    if fits.is_empty() {
         return None;
     }
+    let speeds: Vec<f64> = fits.iter().map(|f| f.0).collect();
     let kmh = median(speeds.clone());
     let mad = median(speeds.iter().map(|v| (v - kmh).abs()).collect());
+    // The spread of the window speeds says how well the median is known when there are many
+    // windows; with one or a few (their MAD is 0 for one) each window's own residuals do. The
+    // larger of the two, over the independent windows.
+    let window_se = median(fits.iter().map(|f| f.1).collect());
     let independent = (n as f64 / window as f64).max(1.0);
     let fit_kmh = slope(t, &d).map_or(f64::NAN, |v| v.abs() * 3.6);
     Some(SpeedEstimate {
         kmh,
-        uncertainty_kmh: 1.4826 * mad / independent.sqrt(),
+        uncertainty_kmh: (1.4826 * mad).max(window_se) / independent.sqrt(),
         fit_kmh,
         windows: speeds.len(),
     })
+}
+
+/// The least-squares slope of `y` on `x` and its standard error from the residuals
+/// (`sqrt(SSR / (n - 2) / Sxx)`); `None` when `x` does not vary or the slope is not finite.
+fn window_fit(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
+    let (slope, intercept) = vpcal_formats::bcs_speed::least_squares(x, y);
+    if !slope.is_finite() || x.len() < 3 {
+        return None;
+    }
+    let mx = x.iter().sum::<f64>() / x.len() as f64;
+    let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
+    let ssr: f64 = x
+        .iter()
+        .zip(y)
+        .map(|(a, b)| (b - (slope * a + intercept)).powi(2))
+        .sum();
+    let se = (ssr / (x.len() - 2) as f64 / sxx).sqrt();
+    se.is_finite().then_some((slope, se))
+}
+
+/// The standard error a speed has at least, km/h, when its road points are known to no
+/// better than the pixel grid: a contact point rounded to whole pixels is off by
+/// `1/sqrt(12)` px (sd), which at `metres_per_px` and over `n` points spanning `duration_s`
+/// seconds (evenly spaced: `Sxx = duration² · n (n + 1) / (12 (n - 1))`) is the standard error
+/// of a line's slope. `0` when the span is not positive.
+pub fn pixel_speed_floor_kmh(metres_per_px: f64, n: usize, duration_s: f64) -> f64 {
+    if n < 2 || duration_s.is_nan() || duration_s <= 0.0 || !metres_per_px.is_finite() {
+        return 0.0;
+    }
+    let nf = n as f64;
+    let sxx = duration_s * duration_s * nf * (nf + 1.0) / (12.0 * (nf - 1.0));
+    let sd_m = metres_per_px / 12f64.sqrt();
+    3.6 * sd_m / sxx.sqrt()
+}
+
+/// The median of the road distance per image pixel between a track's consecutive road
+/// points (those at least a pixel apart), metres per pixel; `None` without such pairs.
+fn metres_per_px(points: &[TrackPoint]) -> Option<f64> {
+    let ratios: Vec<f64> = points
+        .windows(2)
+        .filter_map(|w| {
+            let (a, b) = (w[0].road_m?, w[1].road_m?);
+            let px = (w[1].image - w[0].image).norm();
+            (px >= 1.0).then(|| (b[0] - a[0]).hypot(b[1] - a[1]) / px)
+        })
+        .filter(|r| r.is_finite())
+        .collect();
+    vpcal_geom::solve::median(&ratios)
 }
 
 /// Counts for the summary line: tracks, tracks with a speed, median speed (km/h).
@@ -908,7 +1060,6 @@ mod tests {
                     frame: f,
                     time_s: t,
                     image: Point2::new(0.0, 0.0),
-                    box_px: BoxPx::new(0.0, 0.0, 1.0, 1.0),
                     clipped: false,
                     road_m: Some([x0 + v * t, y]),
                 }

@@ -4,7 +4,7 @@
 
 use crate::common;
 
-use common::{read_calibration, read_json, real_data, text, vpcal};
+use common::{read_calibration, read_json, real_data, stderr, text, vpcal};
 use std::path::Path;
 
 /// Files in `dir` (to check that no temporary file is left behind).
@@ -49,7 +49,7 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
     assert_eq!(code, 0, "exit {code}: {}", text(&r));
     assert!(text(&r).contains("200 processed (320x240)"), "{}", text(&r));
     let calib = read_json(&out.path().join("calib.json"));
-    assert_eq!(calib["format"], "vpcal-calibration/2");
+    assert_eq!(calib["format"], "vpcal-calibration/3");
     assert_eq!(calib["image_size"], serde_json::json!([320, 240]));
     assert_eq!(calib["input"]["frames_processed"], 200);
     // The motion detector's warm-up (3 s) is looked at again once its background is built;
@@ -214,7 +214,7 @@ fn calibrate_refuses_bad_input_without_leaving_files() {
     assert_eq!(r.status.code(), Some(1), "{}", text(&r));
     assert!(text(&r).contains("no_such_model.onnx"), "{}", text(&r));
     assert!(!calib.exists());
-    // --every 0 is refused by the frame selection.
+    // --every 0 is a wrong command line (exit 2, naming the flag).
     let r = vpcal(&[
         "calibrate",
         img.to_str().unwrap(),
@@ -223,7 +223,7 @@ fn calibrate_refuses_bad_input_without_leaving_files() {
         "-o",
         calib.to_str().unwrap(),
     ]);
-    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert_eq!(r.status.code(), Some(2), "{}", text(&r));
     assert!(text(&r).contains("every"), "{}", text(&r));
     // Without an output the result would be lost: refused before the run (usage, exit 2).
     let r = vpcal(&["calibrate", img.to_str().unwrap()]);
@@ -517,8 +517,6 @@ fn scale_then_measure_gives_metres_on_the_road() {
         "600,500,700,650",
         "--points",
         "700,650,600,500",
-        "--points",
-        "10,-50,20,600",
         "--json",
     ]);
     assert!(r.status.success(), "{}", text(&r));
@@ -528,8 +526,24 @@ fn scale_then_measure_gives_metres_on_the_road() {
         assert!((d - 12.5).abs() < 1e-9, "{d}");
         assert_eq!(v[k]["unit"], "m");
     }
-    // A point above the horizon does not see the road.
-    assert!(v[2]["distance"].is_null());
+    // A point above the horizon (here: outside the frame, whose top row is the horizon) is
+    // refused (exit 1) with the reason, nothing measured; one just below it is measured with
+    // a warning.
+    let r = vpcal(&["measure", c, "--points", "10,-50,20,600", "--json"]);
+    assert_eq!(r.status.code(), Some(1), "{}", text(&r));
+    assert!(
+        text(&r).contains("outside the 1280x720 frame"),
+        "{}",
+        text(&r)
+    );
+    assert!(r.stdout.is_empty());
+    let r = vpcal(&["measure", c, "--points", "600,2,700,650"]);
+    assert!(r.status.success(), "{}", text(&r));
+    assert!(
+        stderr(&r).contains("2.0 px below the horizon"),
+        "{}",
+        text(&r)
+    );
     // The scaled camera for OpenCV: metres, and the camera's height.
     let yml = dir.path().join("camera.yml");
     let r = vpcal(&["export", c, "--opencv", yml.to_str().unwrap()]);
@@ -558,7 +572,7 @@ fn scale_then_measure_gives_metres_on_the_road() {
     // Malformed files name the field; other JSON files are not taken for calibrations.
     std::fs::write(
         dir.path().join("bad.json"),
-        r#"{"format": "vpcal-calibration/2", "status": "calibrated", "image_size": [64, 48],
+        r#"{"format": "vpcal-calibration/3", "status": "calibrated", "image_size": [64, 48],
             "vp1": [1, 2], "pp": [0, 0]}"#,
     )
     .unwrap();

@@ -6,3 +6,5 @@ mod cli;
 mod common;
 mod library;
 mod net_cli;
+mod report;
+mod trust;

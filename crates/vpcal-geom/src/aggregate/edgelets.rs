@@ -186,6 +186,9 @@ pub struct BoxEdgelets<'a> {
     pub vp1: Point2,
     pub vp2: Point2,
     pub edgelets: &'a [Edgelet],
+    /// The physical vehicle the box shows (boxes of one vehicle share it; see
+    /// `robust::vehicle_units`): the bootstrap resamples vehicles, not boxes.
+    pub vehicle: usize,
 }
 
 /// What the edgelets say.
@@ -227,12 +230,15 @@ pub(super) fn vp2_direction(vp1: Point2, pp: Point2, ln_f: f64, roll: f64) -> (P
     (h, -v.dot(h) / (f * f + v.dot(v)))
 }
 
-/// Edgelets of the vehicles that the fit uses, flattened, with each one's vehicle index.
+/// Edgelets of the vehicles that the fit uses, flattened, with each one's box index
+/// (`group`), and each box's physical vehicle (`vehicle_of_group`, numbered `0..vehicles`).
 struct Flat {
     point: Vec<Point2>,
     angle: Vec<f64>,
     group: Vec<usize>,
     groups: usize,
+    vehicle_of_group: Vec<usize>,
+    vehicles: usize,
 }
 
 fn cost(flat: &Flat, gw: &[f64], vp1: Point2, pp: Point2, x: &[f64], s: f64) -> f64 {
@@ -304,10 +310,10 @@ pub fn fit(
     seed: u64,
 ) -> Option<EdgeletFit> {
     let ex1 = opts.exclude_vp1_deg.to_radians();
-    let kept: Vec<Vec<(Point2, f64)>> = vehicles
+    let kept: Vec<(usize, Vec<(Point2, f64)>)> = vehicles
         .iter()
         .map(|v| {
-            near_ray(
+            let near = near_ray(
                 v.centre,
                 v.vp2,
                 v.edgelets,
@@ -320,11 +326,12 @@ pub fn fit(
                 line_angle_diff(e.angle - d.y.atan2(d.x)).abs() > ex1
             })
             .map(|e| (e.point(), e.angle))
-            .collect::<Vec<_>>()
+            .collect::<Vec<_>>();
+            (v.vehicle, near)
         })
-        .filter(|v: &Vec<_>| !v.is_empty())
+        .filter(|(_, v)| !v.is_empty())
         .collect();
-    let total: usize = kept.iter().map(Vec::len).sum();
+    let total: usize = kept.iter().map(|(_, v)| v.len()).sum();
     if kept.len() < opts.min_vehicles || total < opts.min_edgelets || !vp1.is_finite() {
         return None;
     }
@@ -335,9 +342,12 @@ pub fn fit(
         angle: vec![],
         group: vec![],
         groups: 0,
+        vehicle_of_group: vec![],
+        vehicles: 0,
     };
     let mut next = 0.0;
-    for (i, v) in kept.iter().enumerate() {
+    let mut renumber = std::collections::HashMap::new();
+    for (i, (vehicle, v)) in kept.iter().enumerate() {
         if (i as f64) < next {
             continue;
         }
@@ -348,7 +358,11 @@ pub fn fit(
             flat.group.push(flat.groups);
         }
         flat.groups += 1;
+        let n = renumber.len();
+        flat.vehicle_of_group
+            .push(*renumber.entry(*vehicle).or_insert(n));
     }
+    flat.vehicles = renumber.len();
     let s = opts.scale_deg.to_radians();
     let ones = vec![1.0; flat.groups];
     let [lo_w, hi_w] = STRAIGHT_FOCAL_GRID_WIDTHS;
@@ -375,7 +389,9 @@ pub fn fit(
     let mut rng = SplitMix(seed ^ 0xED6E_1E75);
     let (mut fs, mut rolls) = (vec![], vec![]);
     for _ in 0..opts.bootstrap {
-        let w: Vec<f64> = (0..flat.groups).map(|_| rng.poisson1()).collect();
+        // One count per vehicle, shared by its boxes.
+        let draws: Vec<f64> = (0..flat.vehicles).map(|_| rng.poisson1()).collect();
+        let w: Vec<f64> = flat.vehicle_of_group.iter().map(|&v| draws[v]).collect();
         let xb = nelder_mead(
             |x| cost(&flat, &w, vp1, pp, x, s),
             &x,
@@ -448,6 +464,7 @@ pub fn fit_vp1(
         vp1,
         vp2,
         edgelets,
+        ..
     } in vehicles
     {
         if !vp2.is_finite() || vp2 == centre {
@@ -504,6 +521,8 @@ pub fn fit_vp1(
 pub struct CurvedVehicle<'a> {
     pub tangent: Tangent,
     pub edgelets: &'a [Edgelet],
+    /// The physical vehicle the box shows (as [`BoxEdgelets::vehicle`]).
+    pub vehicle: usize,
 }
 
 /// The camera [`fit_curved`] found.
@@ -531,6 +550,9 @@ struct CurvedFlat {
     angle: Vec<f64>,
     tangent: Vec<Tangent>,
     range: Vec<std::ops::Range<usize>>,
+    /// The physical vehicle of each tangent, numbered `0..vehicles`.
+    vehicle: Vec<usize>,
+    vehicles: usize,
 }
 
 impl CurvedFlat {
@@ -542,7 +564,10 @@ impl CurvedFlat {
             angle: vec![],
             tangent: vec![],
             range: vec![],
+            vehicle: vec![],
+            vehicles: 0,
         };
+        let mut renumber = std::collections::HashMap::new();
         let mut next = 0.0;
         for (i, v) in vehicles.iter().enumerate() {
             if (i as f64) < next || v.edgelets.is_empty() {
@@ -556,7 +581,10 @@ impl CurvedFlat {
             }
             flat.tangent.push(v.tangent);
             flat.range.push(start..flat.point.len());
+            let n = renumber.len();
+            flat.vehicle.push(*renumber.entry(v.vehicle).or_insert(n));
         }
+        flat.vehicles = renumber.len();
         flat
     }
 
@@ -693,7 +721,13 @@ pub fn fit_curved(
     .x;
     let shift = (x[0] - centre[0]).exp();
     for _ in 0..opts.bootstrap.min(10) {
-        let w: Vec<f64> = coarse_weight.iter().map(|cw| cw * rng.poisson1()).collect();
+        // One count per vehicle, shared by its boxes.
+        let draws: Vec<f64> = (0..coarse.vehicles).map(|_| rng.poisson1()).collect();
+        let w: Vec<f64> = coarse_weight
+            .iter()
+            .zip(&coarse.vehicle)
+            .map(|(cw, &v)| cw * draws[v])
+            .collect();
         let xb = nelder_mead(
             |x| coarse.cost(&w, pp, x, s, ex1),
             &centre,

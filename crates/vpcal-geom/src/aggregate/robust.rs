@@ -411,6 +411,10 @@ struct Prepared {
     spread1: Vec<f64>,
     /// The boxes.
     boxes: Vec<BoxPx>,
+    /// The physical vehicle of each box ([`vehicle_units`]): the bootstrap's unit.
+    unit: Vec<usize>,
+    /// How many vehicles `unit` numbers.
+    units: usize,
     repeated: usize,
 }
 
@@ -440,6 +444,8 @@ impl Prepared {
             weight,
             spread1: pickf(&self.spread1),
             boxes: idx.iter().map(|&i| self.boxes[i]).collect(),
+            unit: idx.iter().map(|&i| self.unit[i]).collect(),
+            units: self.units,
             repeated: self.repeated,
         }
     }
@@ -576,11 +582,48 @@ fn repeat_counts(boxes: &[BoxPx], frames: &[Option<f64>], iou: f64) -> Vec<usize
         .collect()
 }
 
+/// The physical vehicle each pair belongs to, numbered `0..n` (returned with `n`): the boxes
+/// of one vehicle seen in consecutive frames (a track of the box tracker, [`tracks::link`])
+/// share a number; a box without a frame or a valid box is a vehicle of its own.
+///
+/// The boxes of one vehicle are not independent evidence: the network and the edges see the
+/// same car, the same way, frame after frame. Bootstraps resample vehicles, not boxes:
+/// resampling the 20 boxes of each of three cars as 60 independent samples gave intervals
+/// that left out the estimate of longer footage of the same camera (20 frames of a real
+/// highway clip, issue 41).
+pub fn vehicle_units(pairs: &[VehicleVps]) -> (Vec<usize>, usize) {
+    let linked: Vec<(f64, BoxPx)> = pairs
+        .iter()
+        .map(|p| match (p.frame, p.box_px) {
+            (Some(f), Some(b)) if f.is_finite() && b.is_valid() => (f, b),
+            // Not linked by the tracker (it skips non-finite frames).
+            _ => (f64::NAN, BoxPx::new(0.0, 0.0, 0.0, 0.0)),
+        })
+        .collect();
+    let mut unit = vec![usize::MAX; pairs.len()];
+    let mut n = 0;
+    for track in tracks::link(&linked, &TrackOptions::default()) {
+        for i in track {
+            unit[i] = n;
+        }
+        n += 1;
+    }
+    for u in &mut unit {
+        if *u == usize::MAX {
+            *u = n;
+            n += 1;
+        }
+    }
+    (unit, n)
+}
+
 fn prepare(pairs: &[VehicleVps], opts: &RobustOptions, image_h: f64) -> Prepared {
+    let (pair_unit, units) = vehicle_units(pairs);
     let mut boxes = Vec::new();
     let mut frames = Vec::new();
     let mut rows = Vec::new();
-    for p in pairs {
+    let mut row_unit = Vec::new();
+    for (p, u) in pairs.iter().zip(&pair_unit) {
         if !(p.score > opts.min_score && p.vp1.is_finite() && p.vp2.is_finite()) {
             continue;
         }
@@ -594,6 +637,7 @@ fn prepare(pairs: &[VehicleVps], opts: &RobustOptions, image_h: f64) -> Prepared
         let s1 = p.vp1_spread.filter(|s| s.is_finite()).unwrap_or(10.0);
         boxes.push(b);
         frames.push(p.frame);
+        row_unit.push(*u);
         rows.push((c, d1, d2.y.atan2(d2.x), s1, p.vp1, p.vp2));
     }
     let counts = repeat_counts(&boxes, &frames, opts.duplicate_iou);
@@ -607,6 +651,8 @@ fn prepare(pairs: &[VehicleVps], opts: &RobustOptions, image_h: f64) -> Prepared
         weight: Vec::with_capacity(rows.len()),
         spread1: Vec::with_capacity(rows.len()),
         boxes: boxes.clone(),
+        unit: row_unit,
+        units,
         repeated: counts
             .iter()
             .filter(|c| **c as f64 > opts.duplicate_keep)
@@ -1342,7 +1388,7 @@ pub fn aggregate_with_scene(
     let not_enough = |m: String| AggregateError::NotEnoughEvidence(m);
     if !(width > 0.0 && height > 0.0 && pp.is_finite()) {
         return Err(not_enough(format!(
-            "invalid image size {width}x{height} or principal point {pp:?}"
+            "invalid image size {width}x{height} or principal point {pp}"
         )));
     }
     let full = prepare(pairs, opts, height);
@@ -1465,16 +1511,19 @@ pub fn aggregate_with_scene(
     let (vp1, x, rays_trusted) =
         fit_camera(&model, &vp1_lines, &vp1_lines.weight, &prep.weight, None);
     // The vehicles with edgelets, for both edgelet fits.
+    let (pair_unit, _) = vehicle_units(pairs);
     let boxes: Vec<BoxEdgelets> = pairs
         .iter()
         .zip(edgelets)
-        .filter(|(p, e)| p.score > opts.min_score && !e.is_empty())
-        .filter_map(|(p, e)| {
+        .zip(&pair_unit)
+        .filter(|((p, e), _)| p.score > opts.min_score && !e.is_empty())
+        .filter_map(|((p, e), u)| {
             Some(BoxEdgelets {
                 centre: p.box_px.filter(BoxPx::is_valid)?.center(),
                 vp1: p.vp1,
                 vp2: p.vp2,
                 edgelets: e,
+                vehicle: *u,
             })
         })
         .collect();
@@ -1559,6 +1608,7 @@ pub fn aggregate_with_scene(
                 (!e.is_empty()).then_some(CurvedVehicle {
                     tangent: (*t)?,
                     edgelets: e,
+                    vehicle: pair_unit[i],
                 })
             })
             .collect();
@@ -1673,7 +1723,9 @@ pub fn aggregate_with_scene(
         let (mut fs, mut angles, mut vx, mut vy) = (vec![], vec![], vec![], vec![]);
         let q1 = from_sphere(p1);
         for _ in 0..opts.bootstrap {
-            let counts: Vec<f64> = (0..prep.weight.len()).map(|_| rng.poisson1()).collect();
+            // One count per vehicle, shared by its boxes ([`vehicle_units`]).
+            let draws: Vec<f64> = (0..prep.units).map(|_| rng.poisson1()).collect();
+            let counts: Vec<f64> = prep.unit.iter().map(|&u| draws[u]).collect();
             let scaled = |w: &[f64], c: &[f64]| -> Vec<f64> {
                 w.iter().zip(c).map(|(a, c)| a * c).collect()
             };

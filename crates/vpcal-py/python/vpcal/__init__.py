@@ -78,7 +78,9 @@ class Options:
       views).
     - Scale and outputs: ``scale_points`` ``(x1, y1, x2, y2)`` and ``scale_distance`` (metres)
       give the metric scale; ``tracks`` (False) computes the vehicle tracks (speeds with a
-      scale); ``vehicles`` (False) keeps the per-vehicle VP records.
+      scale); ``vehicles`` (False) keeps the per-vehicle VP records; ``overlay`` (False) keeps
+      the overlay picture (``--overlay``'s PNG: :attr:`Calibration.overlay_png`), which
+      :meth:`Calibration.report` then shows.
     """
 
     model: Optional[str] = None
@@ -108,6 +110,7 @@ class Options:
     scale_distance: Optional[float] = None
     tracks: Optional[bool] = None
     vehicles: Optional[bool] = None
+    overlay: Optional[bool] = None
 
     def to_dict(self) -> Dict[str, Any]:
         """The settings that are set (not None), with paths as strings."""
@@ -296,6 +299,7 @@ def calibrate(
         tracks=json.loads(r["tracks"]) if "tracks" in r else None,
         vehicles=json.loads(r["vehicles"]) if "vehicles" in r else None,
         run_warnings=list(r["warnings"]),
+        overlay_png=r.get("overlay_png"),
     )
     if not r["ok"] and raise_on_failure:
         e = NotCalibrated(r["reason"])
@@ -480,6 +484,7 @@ class Calibration:
         tracks: Optional[Dict[str, Any]] = None,
         vehicles: Optional[List[Dict[str, Any]]] = None,
         run_warnings: Optional[List[str]] = None,
+        overlay_png: Optional[bytes] = None,
     ) -> None:
         self._doc = doc
         self._tracks = tracks
@@ -487,6 +492,9 @@ class Calibration:
         """Per-vehicle VP records (VPout items) when calibrated with ``vehicles=True``."""
         self.run_warnings: List[str] = run_warnings or []
         """What the run said about its input (a truncated video, ...)."""
+        self.overlay_png: Optional[bytes] = overlay_png
+        """The overlay picture (PNG bytes, as ``calibrate --overlay`` writes it) when calibrated
+        with ``overlay=True``."""
         self._camera: Optional[Any] = None
 
     def __getstate__(self) -> Dict[str, Any]:
@@ -507,6 +515,27 @@ class Calibration:
         """Write the calibration file (strict JSON, atomically), byte for byte as the CLI."""
         _native.write_calibration(self._text(), os.fspath(path))
 
+    def report(self, path: Optional[PathLike] = None) -> str:
+        """The self-contained HTML report of this calibration, as ``vpcal calibrate --report``
+        writes it (written to ``path``, atomically, when given); returns the page.
+
+        It always holds the focal length with its interval and sources, the horizon, the
+        evidence for VP1, the metric scale, the run's settings and every warning with what to
+        do about it. The picture is included when this calibration holds it (calibrated with
+        ``overlay=True``), the tracks table and speed histogram when it holds tracks
+        (``tracks=True``); a calibration read from a file (:meth:`load`) has neither. The page
+        needs no network: the picture is inlined, the plots are inline SVG.
+        """
+        html = _native.render_report(
+            self._text(),
+            None if self._tracks is None else json.dumps(self._tracks),
+            self.overlay_png,
+            list(self.run_warnings),
+        )
+        if path is not None:
+            _native.write_report(os.fspath(path), html)
+        return html
+
     @staticmethod
     def load(path: PathLike) -> "Calibration":
         """Read a calibration file (any version vpcal reads)."""
@@ -516,15 +545,23 @@ class Calibration:
         if not self.ok:
             return f"Calibration(not calibrated: {self.reason})"
         return (
-            f"Calibration(focal_px={self.focal_px:.1f} ({self.focal_source}), "
+            f"Calibration({self.status}, focal_px={self.focal_px:.1f} ({self.focal_source}), "
             f"horizon {self.horizon_angle_deg:.2f}°, {self.image_size[0]}x{self.image_size[1]})"
         )
 
     # -- fields -----------------------------------------------------------------------------
     @property
     def ok(self) -> bool:
-        """Whether there is a camera (``status == "calibrated"``)."""
-        return self._doc.get("status") == "calibrated"
+        """Whether there is a camera: ``status`` is ``calibrated``, ``rough`` or ``unreliable``
+        (see :attr:`status`)."""
+        return self._doc.get("status") in ("calibrated", "rough", "unreliable")
+
+    @property
+    def status(self) -> str:
+        """``calibrated`` (every plausibility check passed), ``rough`` (a result is atypical
+        of traffic cameras or traffic: read :attr:`warnings`), ``unreliable`` (a result is
+        impossible: do not measure with it) or ``not_enough_evidence`` (no camera)."""
+        return str(self._doc.get("status"))
 
     @property
     def reason(self) -> Optional[str]:
@@ -691,7 +728,13 @@ class Calibration:
         if not known and not widths:
             raise TypeError("with_scale: give points and distance, distances or lane_widths")
         text = _native.set_scale(self._text(), known, widths)
-        return Calibration(json.loads(text), tracks=self._tracks, vehicles=self.vehicles)
+        return Calibration(
+            json.loads(text),
+            tracks=self._tracks,
+            vehicles=self.vehicles,
+            run_warnings=self.run_warnings,
+            overlay_png=self.overlay_png,
+        )
 
     def road_points(self, pixels: Any) -> np.ndarray:
         """Road-frame points (N x 2: x along the traffic, y across, origin under the camera;

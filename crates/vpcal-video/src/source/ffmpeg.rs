@@ -188,11 +188,25 @@ pub fn probe_video(path: &Path, ffprobe: Option<&Path>) -> Result<VideoProbe> {
 
 /// FFmpeg messages often start with the input path; drop it (the error names the path last).
 fn strip_path_prefix(line: &str, path: &Path) -> String {
+    let line = without_context_pointers(line);
     let p = path.to_string_lossy();
     line.strip_prefix(p.as_ref())
         .map(|r| r.trim_start_matches(':').trim())
-        .unwrap_or(line)
+        .unwrap_or(&line)
         .to_string()
+}
+
+/// An FFmpeg log line without its context prefixes `[demuxer,names @ 0x5641...] `, which name
+/// a memory address: nothing a user can act on.
+fn without_context_pointers(line: &str) -> String {
+    let mut rest = line.trim();
+    while let Some(inner) = rest.strip_prefix('[') {
+        match inner.find(']') {
+            Some(end) if inner[..end].contains(" @ 0x") => rest = inner[end + 1..].trim_start(),
+            _ => break,
+        }
+    }
+    rest.to_string()
 }
 
 /// The last lines FFmpeg wrote to stderr and how many there were.
@@ -511,6 +525,23 @@ impl Drop for FfmpegSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ffmpeg_lines_lose_their_memory_addresses_and_the_path() {
+        let path = Path::new("/tmp/clip.mp4");
+        assert_eq!(
+            strip_path_prefix(
+                "[mov,mp4,m4a,3gp,3g2,mj2 @ 0x5641a2b3c4d0] /tmp/clip.mp4: moov atom not found",
+                path
+            ),
+            "moov atom not found"
+        );
+        assert_eq!(
+            strip_path_prefix("[h264 @ 0x55d0] error while decoding MB 3 4", path),
+            "error while decoding MB 3 4"
+        );
+        assert_eq!(strip_path_prefix("[keep me] text", path), "[keep me] text");
+    }
 
     #[test]
     fn rates_parse() {

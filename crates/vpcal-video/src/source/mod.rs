@@ -252,6 +252,56 @@ pub trait FrameSource: Iterator<Item = Result<Frame>> + Send {
     }
 }
 
+/// A video read at a frame rate other than the one its container states (`--fps`: a
+/// time-lapse, or a CCTV export whose stated rate is wrong): frame times become
+/// `index / fps`; everything else passes through.
+struct RateOverride {
+    inner: Box<dyn FrameSource>,
+    info: SourceInfo,
+}
+
+impl Iterator for RateOverride {
+    type Item = Result<Frame>;
+
+    fn next(&mut self) -> Option<Result<Frame>> {
+        let fps = self.info.fps.unwrap_or(1.0);
+        self.inner.next().map(|r| {
+            r.map(|mut f| {
+                f.time_s = f.index as f64 / fps;
+                f
+            })
+        })
+    }
+}
+
+impl FrameSource for RateOverride {
+    fn info(&self) -> &SourceInfo {
+        &self.info
+    }
+
+    fn warnings(&self) -> Vec<String> {
+        self.inner.warnings()
+    }
+}
+
+/// `source` with its frames timed at `fps` frames per second instead of its own rate (see
+/// [`RateOverride`]); the stated rate is returned beside it.
+pub fn with_frame_rate(
+    source: Box<dyn FrameSource>,
+    fps: f64,
+) -> (Box<dyn FrameSource>, Option<f64>) {
+    let mut info = source.info().clone();
+    let stated = info.fps;
+    info.fps = Some(fps);
+    (
+        Box::new(RateOverride {
+            inner: source,
+            info,
+        }),
+        stated,
+    )
+}
+
 /// File extensions read as still images (case-insensitive).
 pub const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg"];
 

@@ -14,6 +14,13 @@ use super::{Exit, UsageError};
 
 /// Turn per-vehicle VP pairs (a VPout JSON file) into a camera calibration.
 #[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Example (the same camera as calibrate, from its saved records):\n  \
+    vpcal calibrate clip.mp4 -o calib.json --vehicles vehicles.json --scene-edgelets scene.json\n  \
+    vpcal aggregate vehicles.json --scene-edgelets scene.json -o calib2.json\n\n\
+Exit codes: 0 calibrated; 1 an error; 2 a wrong command line; 3 the records could not support \
+a calibration."
+)]
 pub struct Args {
     /// Per-vehicle VP records: the reference's VPout_*.json, or `vpcal calibrate --vehicles`.
     pub vpout: PathBuf,
@@ -49,7 +56,7 @@ pub struct Args {
     pub bootstrap: usize,
     /// The camera's focal length in pixels, when known: VP1 and the horizon still come from
     /// the records.
-    #[arg(long, value_name = "PX")]
+    #[arg(long, value_name = "PX", value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub focal: Option<f64>,
     /// The focal lengths the camera can have, SHORT,LONG in pixels (e.g. a zoom lens's
     /// shortest and longest focal length over the pixel pitch, from its data sheet): the range
@@ -68,11 +75,19 @@ pub fn run(args: Args) -> Result<Exit> {
         )
         .into());
     }
-    for (flag, path) in [("--output", &args.output), ("--bcs-json", &args.bcs_json)] {
-        if let Some(path) = path {
-            check_destination(flag, path)?;
-        }
+    let outputs: Vec<(&str, &std::path::Path)> =
+        [("--output", &args.output), ("--bcs-json", &args.bcs_json)]
+            .into_iter()
+            .filter_map(|(flag, path)| path.as_deref().map(|p| (flag, p)))
+            .collect();
+    for (flag, path) in &outputs {
+        check_destination(flag, path)?;
     }
+    let mut inputs: Vec<(&str, &std::path::Path)> = vec![("input", args.vpout.as_path())];
+    if let Some(scene) = &args.scene_edgelets {
+        inputs.push(("--scene-edgelets", scene));
+    }
+    vpcal::output::check_distinct_paths(&inputs, &outputs).map_err(UsageError)?;
     let items = read_vpout(&args.vpout)?;
     let scene = match &args.scene_edgelets {
         Some(path) => read_scene_edgelets(path)?,
@@ -113,7 +128,7 @@ pub fn run(args: Args) -> Result<Exit> {
         file.write(path)?;
     }
     if let (Some(path), Ok((cal, _))) = (&args.bcs_json, &result) {
-        write_bcs_system(path, cal, None)?;
+        write_bcs_system(path, cal, file.scale_m_per_unit)?;
     }
     if args.json {
         print!("{}", file.to_json_string());

@@ -37,3 +37,43 @@ pub fn method() -> impl clap::builder::TypedValueParser<Value = vpcal::aggregate
     clap::builder::PossibleValuesParser::new(vpcal::aggregate::Method::NAMES)
         .map(|s| s.parse().unwrap_or(vpcal::aggregate::Method::Robust))
 }
+
+/// A finite number above zero (focal lengths, distances, frame rates). Refused values exit
+/// with the usage code (2) and clap's message naming the flag.
+pub fn positive_f64(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        Ok(_) => Err(format!("expected a positive number, got {s}")),
+        Err(_) => Err(format!("expected a positive number, got {s:?}")),
+    }
+}
+
+/// A whole number of at least 1 (frame steps, frame counts, batch sizes).
+pub fn positive_u64(s: &str) -> Result<u64, String> {
+    match s.trim().parse::<u64>() {
+        Ok(v) if v > 0 => Ok(v),
+        _ => Err(format!("expected a whole number of at least 1, got {s:?}")),
+    }
+}
+
+/// [`positive_u64`] as a `usize`.
+pub fn positive_usize(s: &str) -> Result<usize, String> {
+    positive_u64(s).and_then(|v| usize::try_from(v).map_err(|e| e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn positive_values_refuse_zero_negative_and_non_numbers() {
+        assert_eq!(positive_f64("2.5"), Ok(2.5));
+        for bad in ["0", "-100", "nan", "inf", "x", ""] {
+            assert!(positive_f64(bad).is_err(), "{bad}");
+        }
+        assert_eq!(positive_u64("3"), Ok(3));
+        for bad in ["0", "-1", "1.5", "x"] {
+            assert!(positive_u64(bad).is_err(), "{bad}");
+        }
+    }
+}

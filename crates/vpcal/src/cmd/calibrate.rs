@@ -6,9 +6,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
+use clap::builder::{PathBufValueParser, TypedValueParser};
 use vpcal::aggregate::{Aggregated, Method};
 use vpcal::detector::{DetectorChoice, DetectorSettings};
-use vpcal::output::{self, check_destination};
+use vpcal::output::{self, check_destination, check_distinct_paths};
 use vpcal::overlay;
 use vpcal::pipeline::{open_input, PipelineConfig, PipelineOutput, PrincipalPoint};
 use vpcal::road::KnownDistance;
@@ -20,11 +21,17 @@ use super::{Exit, UsageError};
 
 /// Calibrate a fixed traffic camera from a video, an image folder or an image.
 #[derive(Debug, clap::Args)]
+#[command(after_help = "Examples:\n  \
+    vpcal calibrate clip.mp4 -o calib.json --overlay overlay.png\n  \
+    vpcal calibrate clip.mp4 -o calib.json --tracks tracks.csv \\\n      \
+    --scale-points 412,610,530,598 --scale-distance 6.0      # speeds in km/h\n\n\
+Exit codes: 0 calibrated (read `status` and the warnings); 1 an error; 2 a wrong command \
+line; 3 the footage could not support a calibration (the file says why).")]
 pub struct Args {
     /// Video file (anything FFmpeg reads), folder of images, or one image.
     pub input: PathBuf,
-    /// Write the calibration file here (strict JSON, vpcal-calibration/2; the README's
-    /// "Calibration file" section lists its fields).
+    /// Write the calibration file here (strict JSON, vpcal-calibration/3; its fields:
+    /// docs/calibration-file.md).
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
     /// Also write the camera as a BrnoCompSpeed system file.
@@ -52,7 +59,7 @@ pub struct Args {
     #[arg(long, value_name = "X1,Y1,X2,Y2", value_parser = parse_points, allow_hyphen_values = true, requires = "scale_distance")]
     pub scale_points: Option<[f64; 4]>,
     /// The distance between --scale-points on the road, metres.
-    #[arg(long, value_name = "M", requires = "scale_points")]
+    #[arg(long, value_name = "M", requires = "scale_points", value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub scale_distance: Option<f64>,
     /// Also write a frame with the horizon, vehicle VP directions and a road grid (PNG).
     #[arg(long, value_name = "PNG")]
@@ -61,11 +68,56 @@ pub struct Args {
     /// scale`; `vpcal export` writes it again from a scaled calibration).
     #[arg(long, value_name = "YML")]
     pub opencv: Option<PathBuf>,
+    /// Also write a self-contained HTML report (the overlay picture, the focal length and its
+    /// interval, the horizon, the evidence for VP1, the scale, tracks and speeds, and every
+    /// warning with what to do about it); it opens offline.
+    // Boxed: `Args` is the largest variant of the command enum, which clippy keeps within
+    // 200 bytes of the next (`large_enum_variant`).
+    #[arg(long, value_name = "HTML", value_parser = PathBufValueParser::new().map(Box::new))]
+    pub report: Option<Box<PathBuf>>,
     #[command(flatten)]
     pub pipeline: PipelineArgs,
     /// Print the calibration as JSON on stdout (the summary stays on stderr).
     #[arg(long)]
     pub json: bool,
+}
+
+impl Args {
+    /// The files and folders the run reads, by role or flag.
+    fn input_paths(&self) -> Vec<(&'static str, &Path)> {
+        let mut v: Vec<(&'static str, &Path)> = vec![("input", self.input.as_path())];
+        let p = &self.pipeline;
+        if let Some(m) = &p.model {
+            v.push(("--model", m));
+        }
+        if let Some(d) = &p.detect.detections {
+            v.push(("--detections", d));
+        }
+        if let DetectorChoice::File(f) = &p.detect.detector {
+            v.push(("--detector", f));
+        }
+        if let Some(m) = &p.detect.road_mask {
+            v.push(("--road-mask", m));
+        }
+        v
+    }
+
+    /// The files the run writes, by flag.
+    fn output_paths(&self) -> Vec<(&'static str, &Path)> {
+        [
+            ("--output", &self.output),
+            ("--bcs-json", &self.bcs_json),
+            ("--vehicles", &self.vehicles),
+            ("--scene-edgelets", &self.scene_edgelets),
+            ("--tracks", &self.tracks),
+            ("--overlay", &self.overlay),
+            ("--opencv", &self.opencv),
+        ]
+        .into_iter()
+        .filter_map(|(flag, path)| path.as_deref().map(|p| (flag, p)))
+        .chain(self.report.as_deref().map(|p| ("--report", p.as_path())))
+        .collect()
+    }
 }
 
 /// Frame selection, detection, filtering, network and aggregation settings.
@@ -79,7 +131,7 @@ pub struct PipelineArgs {
     #[arg(long, default_value = "cpu")]
     pub device: String,
     /// Crops per network batch.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = 32, value_parser = super::args::positive_usize)]
     pub batch: usize,
     /// Also run every crop mirrored and average its heatmaps with the crop's own (test-time
     /// augmentation: cancels a network's one-sided rotation of the VP rays; twice the network
@@ -125,7 +177,7 @@ pub struct PipelineArgs {
     /// The camera's focal length in pixels, when known (e.g. lens focal length / pixel pitch
     /// from its data sheet): VP1 and the horizon still come from the footage. Without it the
     /// focal length is measured when the evidence allows, else assumed (and said so).
-    #[arg(long, value_name = "PX")]
+    #[arg(long, value_name = "PX", value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub focal: Option<f64>,
     /// The focal lengths the camera can have, SHORT,LONG in pixels (e.g. a zoom lens's
     /// shortest and longest focal length over the pixel pitch, from its data sheet): the range
@@ -142,16 +194,15 @@ pub struct PipelineArgs {
 #[derive(Debug, Clone, clap::Args)]
 pub struct FrameArgs {
     /// Process every K-th frame.
-    #[arg(long, default_value_t = 1, value_name = "K")]
+    #[arg(long, default_value_t = 1, value_name = "K", value_parser = super::args::positive_u64, allow_negative_numbers = true)]
     pub every: u64,
     /// Stop after this many processed frames.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = super::args::positive_u64, allow_negative_numbers = true)]
     pub max_frames: Option<u64>,
-    /// Frame rate of an image folder: its pictures are then consecutive frames, treated as a
-    /// video (times, tracks and speeds need it). Without it a folder is a set of stills of one
-    /// camera, and a vehicle at the same place in several of them counts once. Videos carry
-    /// their own rate.
-    #[arg(long, value_name = "FPS")]
+    /// Frames per second. An image folder's pictures are then consecutive frames (without it,
+    /// stills of one camera). A video's frames are timed at this rate instead of the one its
+    /// file states: for a time-lapse or an export with a wrong rate (speeds scale with it).
+    #[arg(long, value_name = "FPS", value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub fps: Option<f64>,
     /// Where to start: a frame index (`120`) or a time (`4.5s`).
     #[arg(long, value_parser = parse_start)]
@@ -326,7 +377,10 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
     row("model", out.model.clone());
     match result {
         Ok((cal, agg)) => {
-            row("aggregation", agg.summary.clone());
+            // One clause of the aggregation's summary per line, not one 900-character line.
+            for (i, clause) in agg.summary.split("; ").enumerate() {
+                row(if i == 0 { "aggregation" } else { "" }, clause.to_string());
+            }
             row(
                 "focal length",
                 format!(
@@ -367,6 +421,34 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
     }
 }
 
+/// Write the overlay picture (`--overlay`, when there is a picture) and the HTML report
+/// (`--report`) of a run whose calibration file is `doc`.
+fn write_picture_and_report(
+    args: &Args,
+    img: Option<&image::RgbImage>,
+    doc: &vpcal_formats::calib::CalibrationFile,
+    (tracks, header): (&[vpcal::tracks::VehicleTrack], &output::TracksHeader),
+    out: &PipelineOutput,
+) -> Result<()> {
+    if let (Some(path), Some(img)) = (&args.overlay, img) {
+        vpcal_video::draw::save_png(img, path)?;
+    }
+    if let Some(path) = &args.report {
+        let png = img
+            .map(vpcal_formats::fs::encode_png)
+            .transpose()
+            .map_err(anyhow::Error::msg)?;
+        let input = vpcal::report::ReportInput {
+            overlay_png: png.as_deref(),
+            tracks: Some(tracks),
+            tracks_note: header.note.as_deref(),
+            run_warnings: &out.warnings,
+        };
+        vpcal::report::write(path, &vpcal::report::render_with(doc, &input))?;
+    }
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<Exit> {
     if args.output.is_none() && !args.json && args.bcs_json.is_none() {
         return Err(UsageError(
@@ -376,20 +458,12 @@ pub fn run(args: Args) -> Result<Exit> {
         )
         .into());
     }
-    // Fail before a long run, not after it, when an output cannot be written.
-    for (flag, path) in [
-        ("--output", &args.output),
-        ("--bcs-json", &args.bcs_json),
-        ("--vehicles", &args.vehicles),
-        ("--scene-edgelets", &args.scene_edgelets),
-        ("--tracks", &args.tracks),
-        ("--overlay", &args.overlay),
-        ("--opencv", &args.opencv),
-    ] {
-        if let Some(path) = path {
-            check_destination(flag, path)?;
-        }
+    // Fail before a long run, not after it, when an output cannot be written or would
+    // overwrite an input or another output.
+    for (flag, path) in args.output_paths() {
+        check_destination(flag, path)?;
     }
+    check_distinct_paths(&args.input_paths(), &args.output_paths()).map_err(UsageError)?;
     if let Some(d) = args.scale_distance {
         if !(d.is_finite() && d > 0.0) {
             return Err(UsageError(format!(
@@ -430,7 +504,12 @@ pub fn run(args: Args) -> Result<Exit> {
                     p2: Point2::new(p[2], p[3]),
                     distance_m: d,
                 });
-            let (doc, scale) = output::calibrated_run_file(&out, &config, &cal, &agg, known)?;
+            let output::CalibratedRun {
+                file: doc,
+                scale,
+                tracks,
+                header,
+            } = output::calibrated_run(&out, &config, &cal, &agg, known)?;
             if let (Some(s), Some(source)) = (scale, doc.scale_source.as_deref()) {
                 let height = doc.camera_height_m.unwrap_or(f64::NAN);
                 let interval = doc
@@ -442,29 +521,29 @@ pub fn run(args: Args) -> Result<Exit> {
                     "scale"
                 );
             }
-            for w in doc
-                .warnings
-                .iter()
-                .filter(|w| w.contains("metric scale is automatic"))
-            {
+            // The warnings the summary has not printed yet (the scale's, the plausibility
+            // checks').
+            let printed = agg.warnings();
+            for w in doc.warnings.iter().filter(|w| !printed.contains(w)) {
                 eprintln!("warning: {w}");
             }
+            if doc.status != vpcal_formats::calib::Status::Calibrated {
+                eprintln!(
+                    "  {:<22} {} (see the warnings)",
+                    "status",
+                    doc.status.name().to_uppercase()
+                );
+            }
             if args.tracks.is_some() || args.bcs_json.is_some() {
-                let (tracks, header) = output::run_tracks(&out, scale.map(|s| (&cal, s)), true);
                 if let Some(path) = &args.tracks {
                     output::write_tracks(path, &header, &tracks)?;
                 }
                 let mut line = output::tracks_line(&tracks, &header);
                 if let Some(path) = &args.bcs_json {
-                    let cars = output::write_bcs_system_with_tracks(
-                        path,
-                        &cal,
-                        scale,
-                        &tracks,
-                        header.window_points,
-                    )?;
+                    let cars =
+                        output::write_bcs_system_with_tracks(path, &cal, scale, &tracks, &header)?;
                     line.push_str(&format!(
-                        "; {cars} in the BrnoCompSpeed cars (at least {} unclipped points, speed known to {:.0} %)",
+                        "; {cars} in the BrnoCompSpeed cars (at least {} unclipped points, speed known to {:.0} % and possible for a road vehicle)",
                         header.window_points,
                         100.0 * vpcal::tracks::BCS_MAX_SPEED_REL_UNCERTAINTY
                     ));
@@ -477,12 +556,13 @@ pub fn run(args: Args) -> Result<Exit> {
             if let Some(path) = &args.opencv {
                 output::write_opencv_yaml(path, &doc)?;
             }
-            if let Some(path) = &args.overlay {
-                let Some(picture) = &out.picture else {
+            if args.overlay.is_some() || args.report.is_some() {
+                let cam = Some((&cal, agg.track_lines.as_slice()));
+                let img = overlay::draw_run(&out, &config.frames, cam, &tracks, scale);
+                if args.overlay.is_some() && img.is_none() {
                     bail!("no frame to draw the overlay on");
-                };
-                let img = overlay::draw(picture, &cal, &out.records, &agg.track_lines);
-                vpcal_video::draw::save_png(&img, path)?;
+                }
+                write_picture_and_report(&args, img.as_ref(), &doc, (&tracks, &header), &out)?;
             }
             if args.json {
                 print!("{}", doc.to_json_string());
@@ -495,15 +575,14 @@ pub fn run(args: Args) -> Result<Exit> {
                 doc.write(path)?;
             }
             if let Some(path) = &args.tracks {
-                let (tracks, header) = output::run_tracks(&out, None, false);
+                let (tracks, header) = output::run_tracks(&out, None, false, false);
                 output::write_tracks(path, &header, &tracks)?;
                 say(output::tracks_line(&tracks, &header));
             }
-            if let Some(path) = &args.overlay {
-                if let Some(picture) = &out.picture {
-                    let img = overlay::draw_records_only(picture, &out.records);
-                    vpcal_video::draw::save_png(&img, path)?;
-                }
+            if args.overlay.is_some() || args.report.is_some() {
+                let (tracks, header) = output::run_tracks(&out, None, false, false);
+                let img = overlay::draw_run(&out, &config.frames, None, &tracks, None);
+                write_picture_and_report(&args, img.as_ref(), &doc, (&tracks, &header), &out)?;
             }
             if args.json {
                 print!("{}", doc.to_json_string());

@@ -20,7 +20,13 @@ use vpcal_synth::world::LayoutKind;
 use super::calibrate::{self, PipelineArgs};
 use super::Exit;
 
+/// Render a synthetic traffic clip with a known camera, calibrate it and compare.
 #[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Example:\n  vpcal demo --seed 5 --layout curve -o demo-curve\n\n\
+Exit codes: 0 done; 1 an error; 2 a wrong command line; 3 the clip could not support a \
+calibration."
+)]
 pub struct Args {
     /// Output folder: the scene (dataset/, results/), calib.json and overlay.png.
     #[arg(

@@ -12,6 +12,10 @@ use super::{Exit, FrameBar, UsageError};
 /// Label the vehicles of real footage with the VPs of the camera calibrated from it, as
 /// training crops (`vpcal train --data synth-crops:DIR`).
 #[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Example:\n  vpcal label highway1.mp4 highway2.mp4 -o labelled-crops\n\n\
+Exit codes: 0 done; 1 an error; 2 a wrong command line; 3 no input could be labelled."
+)]
 pub struct Args {
     /// Videos (or image folders with --fps) of fixed cameras looking at straight roads; each
     /// is one camera, named after its file stem.

@@ -33,6 +33,13 @@ fn parse_pair(s: &str) -> Result<PointPair, String> {
 }
 
 #[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Examples (pixels read off a frame of the clip, e.g. the overlay):\n  \
+    vpcal scale calib.json --points 412,610,530,598 --distance 6.0\n  \
+    vpcal scale calib.json --lane-points 300,650,420,655 --lane-width 3.5\n\n\
+Exit codes: 0 done; 1 an error (a pixel above the horizon, a file without a camera); 2 a wrong \
+command line."
+)]
 pub struct ScaleArgs {
     /// A calibration written by `vpcal calibrate -o`.
     pub calib: PathBuf,
@@ -41,14 +48,14 @@ pub struct ScaleArgs {
     #[arg(long, value_parser = parse_pair, allow_hyphen_values = true)]
     pub points: Vec<PointPair>,
     /// The distance between the --points on the road, metres; one per --points.
-    #[arg(long)]
+    #[arg(long, value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub distance: Vec<f64>,
     /// Two pixels on two neighbouring lane lines, x1,y1,x2,y2, anywhere along them (only the
     /// part across the road counts); repeat for several lanes.
     #[arg(long, value_parser = parse_pair, allow_hyphen_values = true)]
     pub lane_points: Vec<PointPair>,
     /// The lane width, metres: one for every --lane-points, or one per --lane-points.
-    #[arg(long)]
+    #[arg(long, value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub lane_width: Vec<f64>,
     /// Write the scaled calibration here (default: update CALIB in place, atomically).
     #[arg(short, long)]
@@ -59,6 +66,11 @@ pub struct ScaleArgs {
 }
 
 #[derive(Debug, clap::Args)]
+#[command(after_help = "Examples:\n  \
+    vpcal measure calib.json --points 412,610,530,598      # a distance on the road\n  \
+    vpcal measure calib.json --at 640,700 --json            # where a pixel is on the road\n\n\
+Exit codes: 0 done; 1 an error (a pixel outside the frame or above the horizon, a file whose \
+fields disagree); 2 a wrong command line.")]
 pub struct MeasureArgs {
     /// A calibration written by `vpcal calibrate -o` (with `vpcal scale` for metres).
     pub calib: PathBuf,
@@ -213,6 +225,28 @@ pub fn run_measure(a: MeasureArgs) -> Result<()> {
         );
     }
     let unit = if f.scale.is_some() { "m" } else { "units" };
+    // Every pixel is checked before anything is printed: a pixel outside the frame or above
+    // the horizon has no place on the road.
+    let mut named: Vec<(String, Point2)> = Vec::new();
+    for (i, PointPair(p1, p2)) in a.points.iter().enumerate() {
+        named.push((format!("--points #{} first pixel", i + 1), *p1));
+        named.push((format!("--points #{} second pixel", i + 1), *p2));
+    }
+    for (i, p) in a.at.iter().enumerate() {
+        named.push((format!("--at #{}", i + 1), *p));
+    }
+    for (what, p) in &named {
+        let below = f.check_measurable(*p, what)?;
+        if below < vpcal::road::NEAR_HORIZON_PX {
+            eprintln!(
+                "warning: {what} ({:.1}, {:.1}) is {below:.1} px below the horizon: there 1 px \
+                 moves its distance by about {:.0} %; a pixel lower on the road measures better",
+                p.x,
+                p.y,
+                100.0 / below
+            );
+        }
+    }
     let mut rows = Vec::new();
     for PointPair(p1, p2) in &a.points {
         rows.push((*p1, *p2, f.distance(*p1, *p2)));
@@ -270,6 +304,10 @@ pub fn run_measure(a: MeasureArgs) -> Result<()> {
 }
 
 #[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Example:\n  vpcal export calib.json --opencv camera.yml\n\n\
+Exit codes: 0 done; 1 an error; 2 a wrong command line."
+)]
 pub struct ExportArgs {
     /// A calibration written by `vpcal calibrate -o` (with `vpcal scale` for metres).
     pub calib: PathBuf,
@@ -281,6 +319,8 @@ pub struct ExportArgs {
 
 pub fn run_export(a: ExportArgs) -> Result<()> {
     vpcal::output::check_destination("--opencv", &a.opencv)?;
+    vpcal::output::check_distinct_paths(&[("input", &a.calib)], &[("--opencv", &a.opencv)])
+        .map_err(super::UsageError)?;
     let mut f = RoadCamera::read(&a.calib)?;
     f.file
         .refresh_export()
@@ -296,5 +336,92 @@ pub fn run_export(a: ExportArgs) -> Result<()> {
             "road units: no metric scale yet"
         }
     );
+    Ok(())
+}
+
+#[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Example (after `vpcal calibrate clip.mp4 -o calib.json --tracks \
+tracks.json`):\n  \
+    vpcal scale calib.json --points 412,610,530,598 --distance 6.0\n  \
+    vpcal speeds calib.json tracks.json -o tracks_scaled.csv\n\n\
+Exit codes: 0 done; 1 an error; 2 a wrong command line."
+)]
+pub struct SpeedsArgs {
+    /// A calibration with a metric scale (`vpcal calibrate -o`, then `vpcal scale`).
+    pub calib: PathBuf,
+    /// Tracks written by `vpcal calibrate --tracks` (CSV or JSON).
+    pub tracks: PathBuf,
+    /// Write the re-measured tracks here: CSV when it ends in `.csv`, else JSON.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: PathBuf,
+    /// Also write the camera and the tracks as a BrnoCompSpeed system file.
+    #[arg(long, value_name = "FILE")]
+    pub bcs_json: Option<PathBuf>,
+}
+
+/// `vpcal speeds`: saved tracks measured again with a calibration (after `vpcal scale`),
+/// without processing the video again.
+pub fn run_speeds(a: SpeedsArgs) -> Result<()> {
+    let mut outputs: Vec<(&str, &std::path::Path)> = vec![("--output", &a.output)];
+    if let Some(b) = &a.bcs_json {
+        outputs.push(("--bcs-json", b));
+    }
+    for (flag, path) in &outputs {
+        vpcal::output::check_destination(flag, path)?;
+    }
+    vpcal::output::check_distinct_paths(
+        &[("calibration", &a.calib), ("tracks file", &a.tracks)],
+        &outputs,
+    )
+    .map_err(super::UsageError)?;
+    let f = RoadCamera::read(&a.calib)?;
+    let Some(scale) = f.scale else {
+        anyhow::bail!(
+            "{}: no metric scale: give it a known distance first (`vpcal scale {} --points \
+             X1,Y1,X2,Y2 --distance M`)",
+            a.calib.display(),
+            a.calib.display()
+        );
+    };
+    let saved = vpcal::output::read_tracks(&a.tracks)?;
+    let [w, h] = f.file.image_size;
+    if let Some((tw, th)) = saved.size.filter(|s| *s != (w, h)) {
+        anyhow::bail!(
+            "{}: the tracks are of {tw}x{th} frames, the calibration {} of {w}x{h}: they are \
+             not of the same camera view",
+            a.tracks.display(),
+            a.calib.display()
+        );
+    }
+    let settings = vpcal::tracks::TrackSettings::default();
+    let tracks = vpcal::tracks::remeasure_tracks(saved.tracks, (&f.cal, scale), &settings);
+    let header = vpcal::output::TracksHeader {
+        input: saved
+            .input
+            .unwrap_or_else(|| a.tracks.display().to_string()),
+        fps: saved.fps.or(f.file.input.fps),
+        size: (w, h),
+        scale_m_per_unit: Some(scale),
+        window_points: settings.window_points,
+        note: None,
+        speed_factor: Some(vpcal::plausible::along_factor(&f.file)),
+    };
+    for finding in vpcal::plausible::check_speeds(&tracks, &f.file, false) {
+        eprintln!("warning ({}): {}", finding.status.name(), finding.warning);
+    }
+    vpcal::output::write_tracks(&a.output, &header, &tracks)?;
+    let mut line = vpcal::output::tracks_line(&tracks, &header);
+    if let Some(path) = &a.bcs_json {
+        let cars = vpcal::output::write_bcs_system_with_tracks(
+            path,
+            &f.cal,
+            Some(scale),
+            &tracks,
+            &header,
+        )?;
+        line.push_str(&format!("; {cars} in the BrnoCompSpeed cars"));
+    }
+    println!("{line} -> {}", a.output.display());
     Ok(())
 }

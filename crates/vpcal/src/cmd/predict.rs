@@ -20,6 +20,10 @@ pub enum Decode {
 }
 
 #[derive(Debug, ClapArgs)]
+#[command(
+    after_help = "Example:\n  vpcal predict car.png --box 410,220,530,300 --frame frame.png\n\n\
+Exit codes: 0 done; 1 an error; 2 a wrong command line."
+)]
 pub struct Args {
     /// Vehicle crop images (any size; each is resized to the network input).
     #[arg(required = true, value_name = "CROP")]

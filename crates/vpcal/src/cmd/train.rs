@@ -38,6 +38,11 @@ pub enum LossArg {
 }
 
 #[derive(Debug, ClapArgs)]
+#[command(
+    after_help = "Examples:\n  vpcal train --data synth:2000 -o runs/try --epochs 2\n  \
+vpcal train -o runs/try --resume\n\n\
+Exit codes: 0 done; 1 an error; 2 a wrong command line."
+)]
 pub struct Args {
     /// Training data: `boxcars:DIR` (BoxCars116k), `synth:N` (N synthetic crops rendered on
     /// the fly), `synth-crops:DIR` (crops written by `vpcal synth crops` or self-labelled real
