@@ -35,11 +35,12 @@ pub enum Status {
     /// The camera fields are present and every plausibility check passed.
     Calibrated,
     /// The camera fields are present, but a result lies outside what is typical of traffic
-    /// cameras and traffic (a speed, the camera's height or tilt, a lane width): `warnings`
-    /// says which; measurements may be off by more than the intervals say.
+    /// cameras and traffic (the tracks' speeds, the camera's height): `warnings` says which;
+    /// measurements may be off by more than the intervals say.
     Rough,
     /// The camera fields are present, but a result is impossible for a traffic camera or for
-    /// road traffic (`warnings` says which): do not measure with it.
+    /// road traffic, or rests on evidence too weak to carry it (`warnings` says which): do not
+    /// measure with it.
     Unreliable,
     /// The footage did not support a calibration; `reason` says why.
     NotEnoughEvidence,

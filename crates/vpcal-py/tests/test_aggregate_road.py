@@ -95,7 +95,7 @@ def test_road_points_and_distances_match_vpcal_measure(vpout, cli, tmp_path):
     assert both.to_dict()["scale_source"] == "distance_and_lane_width"
 
     pairs = [(100.0, 1000.0, 1800.0, 950.0), (960.0, 600.0, 960.0, 1079.0),
-             (500.0, 800.0, 520.0, 820.0), (960.0, -400.0, 960.0, 1000.0)]
+             (500.0, 800.0, 520.0, 820.0)]
     args = []
     for p in pairs:
         args += ["--points", ",".join(map(str, p))]
@@ -104,11 +104,12 @@ def test_road_points_and_distances_match_vpcal_measure(vpout, cli, tmp_path):
     measured = [row["distance"] for row in json.loads(r.stdout)]
     ours = scaled.distances(pairs)
     for m, d in zip(measured, ours):
-        if m is None:
-            assert np.isnan(d)
-        else:
-            assert d == pytest.approx(m, rel=1e-12)
-    assert measured[3] is None  # above the horizon
+        assert d == pytest.approx(m, rel=1e-12)
+    # A pixel above the horizon: the CLI refuses it (exit 1), the library gives NaN.
+    above = (960.0, -400.0, 960.0, 1000.0)
+    r = cli("measure", str(tmp_path / "scaled.json"), "--points", ",".join(map(str, above)))
+    assert r.returncode == 1 and "outside the" in r.stderr, r.stderr
+    assert np.isnan(scaled.distances([above])[0])
 
     # Road points in metres: their distances are the measured ones, and pixels() inverts them.
     px = np.array([[p[0], p[1]] for p in pairs[:3]] + [[p[2], p[3]] for p in pairs[:3]])
@@ -117,6 +118,7 @@ def test_road_points_and_distances_match_vpcal_measure(vpout, cli, tmp_path):
         assert np.linalg.norm(road[k] - road[k + 3]) == pytest.approx(measured[k], rel=1e-9)
     assert np.allclose(scaled.pixels(road), px, atol=1e-6)
     assert np.isnan(scaled.road_points([960.0, -400.0])).all()
-    # Without a scale: road units, consistent with the scale.
-    unscaled = cal.road_points(px[:1])
-    assert np.allclose(unscaled * scaled.scale, road[:1], rtol=1e-9)
+    # With the automatic scale the records' boxes give (as `vpcal aggregate`), or road units
+    # without one: proportional to the known distance's metres.
+    auto = cal.road_points(px[:1])
+    assert np.allclose(auto / (cal.scale or 1.0) * scaled.scale, road[:1], rtol=1e-9)

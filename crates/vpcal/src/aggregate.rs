@@ -484,9 +484,9 @@ pub fn aggregate(
                     }
                 }
             );
-            // The curved-road fit sets the focal length with the horizon (from the tracks'
+            // The curved-road fit can set the focal length with the horizon (from the tracks'
             // tangents and the edgelets), whether or not the straight edgelet fit could.
-            let focal_source = if e.focal_from_edgelets || e.curved_fit {
+            let focal_source = if e.focal_from_edgelets || e.curved_focal {
                 FocalSource::Edgelets
             } else if e.rays_trusted {
                 FocalSource::Network
@@ -596,6 +596,7 @@ pub fn aggregate(
                 "curved_tracks": e.curved_tracks,
                 "road_curved": e.road_curved,
                 "curved_fit": e.curved_fit,
+                "curved_focal": e.curved_focal,
                 "curved_vehicles": e.curved_vehicles,
                 "vp1_from_edgelets": e.vp1_from_edgelets,
                 "vp1_edgelets": e.vp1_edgelets,

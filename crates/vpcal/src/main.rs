@@ -27,7 +27,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Calibrate a fixed traffic camera from a video, an image folder or an image.
-    Calibrate(cmd::calibrate::Args),
+    Calibrate(Box<cmd::calibrate::Args>),
     /// Render a synthetic traffic clip with a known camera, calibrate it and compare.
     Demo(cmd::demo::Args),
     /// Find the vehicles in footage with a detector and write their boxes.
@@ -65,7 +65,7 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Calibrate(args) => return exit_code(cmd::calibrate::run(args)),
+        Command::Calibrate(args) => return exit_code(cmd::calibrate::run(*args)),
         Command::Demo(args) => return exit_code(cmd::demo::run(args)),
         Command::Aggregate(args) => return exit_code(cmd::aggregate::run(args)),
         Command::Label(args) => return exit_code(cmd::label::run(args)),

@@ -7,9 +7,9 @@
 //! calibration's status ([`Status::Rough`]: atypical; [`Status::Unreliable`]: impossible),
 //! instead of being filtered out silently or printed as if it were true.
 //!
-//! Every check takes the calibration's own uncertainty into account: a speed is implausible
+//! Every check takes the calibration's own uncertainty into account: a speed is impossible
 //! only when the lower end of what the calibration allows ([`along_factor`]) is still too
-//! fast, so an assumed focal length widens what passes rather than raising false alarms.
+//! fast; a median above what traffic usually drives is atypical (`rough`) either way.
 //!
 //! The bounds (named constants below) come from physics and from how traffic cameras are
 //! mounted, not from one dataset:
@@ -114,15 +114,23 @@ pub fn check_speeds(
         .input
         .fps
         .map_or("its stated".to_string(), |f| format!("{f:.3} frames/s"));
+    // An assumed focal length stretches distances along the road (on a telephoto view by
+    // more than its interval says): the remedy names it too.
+    let focal = if file.focal_source.as_deref() == Some("prior") {
+        ", and the focal length, which is assumed (give --focal PX or --focal-range SHORT,LONG)"
+    } else {
+        ""
+    };
     let rate_remedy = if fps_given {
-        "check the frame rate given with --fps and the metric scale (give a known distance with \
-         `vpcal scale`)"
-            .to_string()
+        format!(
+            "check the frame rate given with --fps and the metric scale (give a known distance \
+             with `vpcal scale`){focal}"
+        )
     } else {
         format!(
             "the clip looks like a time-lapse or its frame rate ({fps}) is wrong: give the true \
-             rate with --fps, or check the metric scale (give a known distance with `vpcal \
-             scale`)"
+             rate with --fps; or check the metric scale (give a known distance with `vpcal \
+             scale`){focal}"
         )
     };
     if speeds.len() >= MIN_TRACKS_FOR_MEDIAN {
@@ -139,14 +147,14 @@ pub fn check_speeds(
                     speeds.len()
                 ),
             ));
-        } else if low > MEDIAN_SPEED_TYPICAL_MAX_KMH {
+        } else if median > MEDIAN_SPEED_TYPICAL_MAX_KMH {
             out.push(failed(
                 SPEEDS_CHECK,
                 Status::Rough,
                 format!(
-                    "the median speed of {} tracks is {median:.0} km/h (at least {low:.0} km/h \
-                     within the calibration's uncertainty), faster than traffic usually flows \
-                     (up to {MEDIAN_SPEED_TYPICAL_MAX_KMH:.0} km/h): {rate_remedy}",
+                    "the median speed of {} tracks is {median:.0} km/h ({low:.0} km/h at the \
+                     low end of the calibration's uncertainty), faster than traffic usually \
+                     flows (up to {MEDIAN_SPEED_TYPICAL_MAX_KMH:.0} km/h): {rate_remedy}",
                     speeds.len()
                 ),
             ));
@@ -293,14 +301,26 @@ mod tests {
     }
 
     #[test]
-    fn the_calibrations_uncertainty_widens_what_passes() {
+    fn the_calibrations_uncertainty_decides_between_rough_and_unreliable() {
         let mut f = file();
         let fast: Vec<VehicleTrack> = [150.0, 160.0, 170.0].map(track).into();
         assert_eq!(check_speeds(&fast, &f, false)[0].status, Status::Rough);
-        // An automatic scale known to ±25 %: 160 km/h may be 128.
+        let faster: Vec<VehicleTrack> = [220.0, 230.0, 240.0].map(track).into();
+        assert_eq!(
+            check_speeds(&faster, &f, false)[0].status,
+            Status::Unreliable
+        );
+        // An automatic scale known to ±25 %: 230 km/h may be 184, atypical but possible.
         f.scale_m_per_unit = Some(0.05);
         f.scale_interval_m_per_unit = Some([0.04, 0.0625]);
-        assert!(check_speeds(&fast, &f, false).is_empty());
+        let found = check_speeds(&faster, &f, false);
+        assert_eq!(found.len(), 1);
+        assert_eq!(found[0].status, Status::Rough);
+        assert!(
+            found[0].warning.contains("184 km/h"),
+            "{}",
+            found[0].warning
+        );
         let [lo, hi] = along_factor(&f);
         assert!(
             (lo * hi - 1.0).abs() < 1e-12 && lo < 0.81 && lo > 0.79,
