@@ -142,6 +142,24 @@ pub struct FocalSensitivity {
     pub across: [f64; 2],
 }
 
+impl FocalSensitivity {
+    /// In words: `over its 68% interval (A-B px) distances along the road (and speeds) change
+    /// by xL-xH, across it by xL-xH`.
+    pub fn describe(&self) -> String {
+        let (a, b) = (self.along, self.across);
+        format!(
+            "over its 68% interval ({:.0}-{:.0} px) distances along the road (and speeds) \
+             change by x{:.2}-x{:.2}, across it by x{:.2}-x{:.2}",
+            self.focal_px[0],
+            self.focal_px[1],
+            a[0].min(a[1]),
+            a[0].max(a[1]),
+            b[0].min(b[1]),
+            b[0].max(b[1])
+        )
+    }
+}
+
 /// The known distance a metric scale came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ScaleReference {

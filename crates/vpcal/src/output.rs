@@ -218,17 +218,7 @@ pub fn set_vehicle_scale(
         .and_then(|iv| crate::autoscale::focal_sensitivity(boxes, size, cal, &auto, iv));
     file.scale_focal_sensitivity = sensitivity;
     let focal_part = sensitivity.map_or(String::new(), |s| {
-        format!(
-            "; and as good as the focal length: over its 68% interval ({:.0}-{:.0} px) \
-             distances along the road (and speeds) change by x{:.2}-x{:.2}, across it by \
-             x{:.2}-x{:.2}",
-            s.focal_px[0],
-            s.focal_px[1],
-            s.along[0].min(s.along[1]),
-            s.along[0].max(s.along[1]),
-            s.across[0].min(s.across[1]),
-            s.across[0].max(s.across[1])
-        )
+        format!("; and as good as the focal length: {}", s.describe())
     });
     file.warnings.push(format!(
         "{} the vehicles' sizes read as typical {} x {} x {} m \
@@ -635,12 +625,13 @@ pub fn run_tracks(
     (tracks, header)
 }
 
-/// The one-line summary of the tracks.
-pub fn tracks_line(tracks: &[VehicleTrack], header: &TracksHeader) -> String {
+/// What the tracks counted, after their number: `, M with a speed, median speed X km/h, L
+/// lanes, T towards VP1 and F from it` (the parts that apply), and the number.
+pub fn tracks_counts(tracks: &[VehicleTrack]) -> (usize, String) {
     let (n, with_speed, median) = summary(tracks);
-    let mut line = format!("tracks: {n}, {with_speed} with a speed");
+    let mut text = format!(", {with_speed} with a speed");
     if let Some(m) = median {
-        line.push_str(&format!(", median speed {m:.1} km/h"));
+        text.push_str(&format!(", median speed {m:.1} km/h"));
     }
     let lanes = tracks.iter().filter_map(|t| t.lane).max().unwrap_or(0);
     if lanes > 0 {
@@ -652,10 +643,17 @@ pub fn tracks_line(tracks: &[VehicleTrack], header: &TracksHeader) -> String {
             .iter()
             .filter(|t| t.towards_vp1 == Some(false))
             .count();
-        line.push_str(&format!(
+        text.push_str(&format!(
             ", {lanes} lanes, {towards} towards VP1 and {from} from it"
         ));
     }
+    (n, text)
+}
+
+/// The one-line summary of the tracks.
+pub fn tracks_line(tracks: &[VehicleTrack], header: &TracksHeader) -> String {
+    let (n, counts) = tracks_counts(tracks);
+    let mut line = format!("tracks: {n}{counts}");
     if let Some(note) = &header.note {
         line.push_str(&format!(" ({note})"));
     }

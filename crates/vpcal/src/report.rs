@@ -1095,19 +1095,7 @@ fn scale_section(file: &CalibrationFile) -> String {
         ));
     }
     if let Some(fs) = &file.scale_focal_sensitivity {
-        rows.push((
-            "with the focal length's interval",
-            format!(
-                "over {:.0}-{:.0} px distances along the road (and speeds) change by \
-                 x{:.2}-x{:.2}, across it by x{:.2}-x{:.2}",
-                fs.focal_px[0],
-                fs.focal_px[1],
-                fs.along[0].min(fs.along[1]),
-                fs.along[0].max(fs.along[1]),
-                fs.across[0].min(fs.across[1]),
-                fs.across[0].max(fs.across[1])
-            ),
-        ));
+        rows.push(("with the focal length's interval", fs.describe()));
     }
     let rows: Vec<(&str, String)> = rows.into_iter().map(|(k, v)| (k, escape(&v))).collect();
     s.push_str(&table(&rows));
@@ -1121,26 +1109,9 @@ fn percentile(v: &[f64], q: f64) -> f64 {
 
 fn tracks_section(file: &CalibrationFile, tracks: &[VehicleTrack], note: Option<&str>) -> String {
     let mut s = String::from("<section id=\"tracks\"><h2>Vehicle tracks and speeds</h2>");
-    let (n, with_speed, median) = crate::tracks::summary(tracks);
-    let towards = tracks
-        .iter()
-        .filter(|t| t.towards_vp1 == Some(true))
-        .count();
-    let from = tracks
-        .iter()
-        .filter(|t| t.towards_vp1 == Some(false))
-        .count();
-    let lanes = tracks.iter().filter_map(|t| t.lane).max().unwrap_or(0);
-    let _ = write!(
-        s,
-        "<p>{n} tracks, {with_speed} with a speed{}{}.</p>",
-        median.map_or(String::new(), |m| format!(", median speed {m:.1} km/h")),
-        if lanes > 0 {
-            format!(", {lanes} lanes, {towards} towards VP1 and {from} from it")
-        } else {
-            String::new()
-        }
-    );
+    let (n, counts) = crate::output::tracks_counts(tracks);
+    let (_, with_speed, _) = crate::tracks::summary(tracks);
+    let _ = write!(s, "<p>{n} tracks{counts}.</p>");
     if let Some(note) = note {
         let _ = write!(s, "<p class=\"what\">{}</p>", escape(note));
     }

@@ -621,13 +621,20 @@ pub fn vehicle_units(pairs: &[VehicleVps]) -> (Vec<usize>, usize) {
     (unit, n)
 }
 
-fn prepare(pairs: &[VehicleVps], opts: &RobustOptions, image_h: f64) -> Prepared {
-    let (pair_unit, units) = vehicle_units(pairs);
+/// The rows of the usable `pairs`, each with its vehicle (`units`: [`vehicle_units`] of
+/// `pairs`).
+fn prepare(
+    pairs: &[VehicleVps],
+    units: &(Vec<usize>, usize),
+    opts: &RobustOptions,
+    image_h: f64,
+) -> Prepared {
+    let (pair_unit, units) = (&units.0, units.1);
     let mut boxes = Vec::new();
     let mut frames = Vec::new();
     let mut rows = Vec::new();
     let mut row_unit = Vec::new();
-    for (p, u) in pairs.iter().zip(&pair_unit) {
+    for (p, u) in pairs.iter().zip(pair_unit) {
         if !(p.score > opts.min_score && p.vp1.is_finite() && p.vp2.is_finite()) {
             continue;
         }
@@ -1406,7 +1413,9 @@ pub fn aggregate_with_scene(
             "invalid image size {width}x{height} or principal point {pp}"
         )));
     }
-    let full = prepare(pairs, opts, height);
+    // Each pair's physical vehicle, for the bootstraps of the fits and of the edgelets.
+    let vehicles = vehicle_units(pairs);
+    let full = prepare(pairs, &vehicles, opts, height);
     // `+ 0.0` turns an empty sum's -0.0 into 0.0 for the messages.
     let effective: f64 = full.weight.iter().sum::<f64>() + 0.0;
     if full.centre.len() < 2 || effective < opts.min_effective_vehicles {
@@ -1526,11 +1535,11 @@ pub fn aggregate_with_scene(
     let (vp1, x, rays_trusted) =
         fit_camera(&model, &vp1_lines, &vp1_lines.weight, &prep.weight, None);
     // The vehicles with edgelets, for both edgelet fits.
-    let (pair_unit, _) = vehicle_units(pairs);
+    let pair_unit = &vehicles.0;
     let boxes: Vec<BoxEdgelets> = pairs
         .iter()
         .zip(edgelets)
-        .zip(&pair_unit)
+        .zip(pair_unit)
         .filter(|((p, e), _)| p.score > opts.min_score && !e.is_empty())
         .filter_map(|((p, e), u)| {
             Some(BoxEdgelets {

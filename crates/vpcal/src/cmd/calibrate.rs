@@ -571,15 +571,18 @@ pub fn run(args: Args) -> Result<Exit> {
             if let Some(path) = &args.output {
                 doc.write(path)?;
             }
-            if let Some(path) = &args.tracks {
+            let picture = args.overlay.is_some() || args.report.is_some();
+            if args.tracks.is_some() || picture {
+                // Tracks without road points, for the tracks file and the picture.
                 let (tracks, header) = output::run_tracks(&out, None, false, false);
-                output::write_tracks(path, &header, &tracks)?;
-                say(output::tracks_line(&tracks, &header));
-            }
-            if args.overlay.is_some() || args.report.is_some() {
-                let (tracks, header) = output::run_tracks(&out, None, false, false);
-                let img = overlay::draw_run(&out, &config.frames, None, &tracks, None);
-                write_picture_and_report(&args, img.as_ref(), &doc, (&tracks, &header), &out)?;
+                if let Some(path) = &args.tracks {
+                    output::write_tracks(path, &header, &tracks)?;
+                    say(output::tracks_line(&tracks, &header));
+                }
+                if picture {
+                    let img = overlay::draw_run(&out, &config.frames, None, &tracks, None);
+                    write_picture_and_report(&args, img.as_ref(), &doc, (&tracks, &header), &out)?;
+                }
             }
             if args.json {
                 print!("{}", doc.to_json_string());
