@@ -5,8 +5,8 @@
 
 use crate::common;
 
-use common::{read_calibration, real_data, stderr, stdout, vpcal};
-use std::path::{Path, PathBuf};
+use common::{read_calibration, real_data, stderr, stdout, vpcal, vpout_file};
+use std::path::PathBuf;
 
 /// The real data root, when its `bcs` folder is there.
 fn data_dir() -> Option<PathBuf> {
@@ -205,15 +205,6 @@ fn eval_bcs_split_selects_sessions() {
         names,
         ["session3_center", "session3_left", "session3_right"]
     );
-}
-
-/// The VPout file of `video` in the data's `bcs/vp_outputs` whose name contains `part`.
-fn vpout_file(data: &Path, video: &str, part: &str) -> PathBuf {
-    std::fs::read_dir(data.join("bcs/vp_outputs").join(video))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "json") && p.to_string_lossy().contains(part))
-        .unwrap()
 }
 
 #[test]

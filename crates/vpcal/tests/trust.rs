@@ -86,10 +86,7 @@ fn outputs_never_replace_the_input_or_each_other() {
 /// A calibration of a real BrnoCompSpeed view from a public CNN's per-vehicle VPs.
 fn real_calibration(dir: &Path) -> Option<PathBuf> {
     let bcs = real_data("bcs")?;
-    let vpout = std::fs::read_dir(bcs.join("vp_outputs/session1_right"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.to_string_lossy().contains("_1.0s_"))?;
+    let vpout = common::vpout_file(bcs.parent()?, "session1_right", "_1.0s_");
     let path = dir.join("calib.json");
     let out = vpcal(&[
         "aggregate",

@@ -49,3 +49,12 @@ pub fn read_json(p: &Path) -> serde_json::Value {
 pub fn read_calibration(p: &Path) -> vpcal_formats::calib::CalibrationFile {
     vpcal_formats::calib::CalibrationFile::read(p).unwrap()
 }
+
+/// The VPout file of `video` in the data's `bcs/vp_outputs` whose name contains `part`.
+pub fn vpout_file(data: &Path, video: &str, part: &str) -> PathBuf {
+    std::fs::read_dir(data.join("bcs/vp_outputs").join(video))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "json") && p.to_string_lossy().contains(part))
+        .unwrap()
+}
