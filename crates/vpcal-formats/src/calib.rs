@@ -27,6 +27,17 @@ pub const SUPPORTED_VERSIONS: [u32; 3] = [1, 2, 3];
 pub const AUTOMATIC_SCALE_WARNING: &str = "the metric scale is automatic:";
 /// What separates the aggregation's summary from the scale's part of it.
 pub const SCALE_SUMMARY_SEPARATOR: &str = "; scale ";
+/// What separates the aggregation's summary from a focal length refitted to known lengths
+/// (`vpcal scale`); the scale's part follows it.
+pub const FOCAL_SUMMARY_SEPARATOR: &str = "; focal length from ";
+/// The starts of the warnings about the aggregation's focal length, which a focal length
+/// measured from known lengths replaces: an assumed one, one outside the given range, the
+/// curved-road fit against the straight one.
+pub const FOCAL_WARNINGS: [&str; 3] = [
+    "the focal length is assumed, not measured",
+    "the measured focal length (",
+    "the curved-road fit gives a focal length",
+];
 
 /// Whether the run produced a camera, and whether it passed the plausibility checks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -485,6 +496,46 @@ impl CalibrationFile {
         self.scale_interval_m_per_unit = None;
         self.scale_focal_sensitivity = None;
         self.update_export(&cal);
+        Ok(())
+    }
+
+    /// Replace the camera by `cal`, whose focal length `source` measured (`distances`: known
+    /// road lengths in two directions) with 68 % interval `interval_px`; `clause` describes
+    /// it in the summary. The warnings about the old focal length go, and so does the metric
+    /// scale: the road unit changed with the camera, so a new scale must follow
+    /// ([`CalibrationFile::set_scale`]).
+    ///
+    /// # Errors
+    /// When the file has no camera.
+    pub fn set_measured_camera(
+        &mut self,
+        cal: &Calibration,
+        source: &str,
+        interval_px: [f64; 2],
+        clause: &str,
+    ) -> Result<(), String> {
+        self.camera()?;
+        self.scale_m_per_unit = None;
+        self.scale_reference = None;
+        self.scale_source = None;
+        self.scale_interval_m_per_unit = None;
+        self.scale_focal_sensitivity = None;
+        self.warnings.retain(|w| {
+            !w.starts_with(AUTOMATIC_SCALE_WARNING)
+                && !FOCAL_WARNINGS.iter().any(|p| w.starts_with(p))
+        });
+        if let Some(summary) = &mut self.summary {
+            for sep in [FOCAL_SUMMARY_SEPARATOR, SCALE_SUMMARY_SEPARATOR] {
+                if let Some(at) = summary.find(sep) {
+                    summary.truncate(at);
+                }
+            }
+            summary.push_str(FOCAL_SUMMARY_SEPARATOR);
+            summary.push_str(clause);
+        }
+        self.set_camera(cal);
+        self.focal_source = Some(source.to_string());
+        self.focal_interval_px = Some(interval_px);
         Ok(())
     }
 

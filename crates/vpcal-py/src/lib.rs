@@ -274,17 +274,19 @@ fn run_result(
     let r = PyDict::new(py);
     match &result {
         Ok((cal, agg)) => {
+            let known: Vec<KnownDistance> = known.into_iter().collect();
             let output::CalibratedRun {
                 file,
+                camera,
                 tracks,
                 header,
                 ..
-            } = output::calibrated_run(out, config, cal, agg, known).map_err(err)?;
+            } = output::calibrated_run(out, config, cal, agg, &known).map_err(err)?;
             if want_tracks {
                 r.set_item("tracks", output::tracks_json(&header, &tracks).to_string())?;
             }
             if want_overlay {
-                let cam = Some((cal, agg.track_lines.as_slice()));
+                let cam = Some((&camera, agg.track_lines.as_slice()));
                 let scale = file.scale_m_per_unit;
                 set_overlay(py, &r, out, config, cam, &tracks, scale)?;
             }
@@ -575,13 +577,15 @@ type KnownLength = ((f64, f64, f64, f64), f64);
 
 /// The calibration file JSON text `text` with the metric scale of known road `distances` and
 /// lane `widths` (as `vpcal scale --points/--distance --lane-points/--lane-width`: their
-/// geometric mean); returns the file and the scale's source.
+/// geometric mean; lengths in two directions also measure the focal length unless
+/// `keep_focal`); returns the file.
 #[pyfunction]
-#[pyo3(signature = (text, distances, widths=Vec::new()))]
+#[pyo3(signature = (text, distances, widths=Vec::new(), keep_focal=false))]
 fn set_scale(
     text: &str,
     distances: Vec<KnownLength>,
     widths: Vec<KnownLength>,
+    keep_focal: bool,
 ) -> PyResult<String> {
     let mut cam =
         RoadCamera::new(calibration_from_text(text, "calibration")?, "calibration").map_err(err)?;
@@ -606,6 +610,10 @@ fn set_scale(
             format!("--lane-points #{}", i - n + 1)
         }
     };
+    vpcal::road::fit_scale(&cam.cal, &inputs, flag).map_err(err)?;
+    if !keep_focal {
+        cam.refit_focal(&inputs);
+    }
     cam.fit_and_set_scale(&inputs, flag, "calibration")
         .map_err(err)?;
     Ok(cam.file.to_json_string())

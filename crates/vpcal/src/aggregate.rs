@@ -204,6 +204,7 @@ fn straight_fit_disagreeing(e: &robust::Evidence, focal_px: f64) -> Option<f64> 
     (e.curved_fit && (focal_px / fs).ln().abs() > 2.0 * MEASURED_FOCAL_MODEL_LOG_SD).then_some(fs)
 }
 
+use vpcal_formats::calib::FOCAL_WARNINGS;
 pub use vpcal_geom::aggregate::robust::PARALLEL_EDGES_VP2_WIDTHS;
 
 impl Aggregated {
@@ -217,17 +218,18 @@ impl Aggregated {
                 None => "the prior",
             };
             out.push(format!(
-                "the focal length is assumed, not measured ({:.0} px from {prior}; \
-                 plausible {lo:.0}-{hi:.0} px): distances and speeds carry its error; give \
-                 the camera's focal length with --focal PX if it is known",
-                self.focal_px
+                "{} ({:.0} px from {prior}; plausible {lo:.0}-{hi:.0} px): distances and \
+                 speeds carry its error; give the camera's focal length with --focal PX if it \
+                 is known, or known lengths along and across the road to `vpcal scale`",
+                FOCAL_WARNINGS[0], self.focal_px
             ));
         }
         if let (Some([a, b]), false) = (self.focal_range_px, self.focal_source.is_assumed()) {
             if !(a..=b).contains(&self.focal_px) {
                 out.push(format!(
-                    "the measured focal length ({:.0} px, from {}) lies outside the given range \
-                     {a:.0}-{b:.0} px: check the range, or the footage's evidence",
+                    "{}{:.0} px, from {}) lies outside the given range {a:.0}-{b:.0} px: \
+                     check the range, or the footage's evidence",
+                    FOCAL_WARNINGS[1],
                     self.focal_px,
                     self.focal_source.name()
                 ));
@@ -241,10 +243,9 @@ impl Aggregated {
         }
         if let Some(fs) = straight_fit_disagreeing(e, self.focal_px) {
             out.push(format!(
-                "the curved-road fit gives a focal length of {:.0} px, the straight-road fit of \
-                 the same edges {fs:.0} px: the road may not be curved (or bends only far \
-                 away); the focal interval spans both",
-                self.focal_px
+                "{} of {:.0} px, the straight-road fit of the same edges {fs:.0} px: the road \
+                 may not be curved (or bends only far away); the focal interval spans both",
+                FOCAL_WARNINGS[2], self.focal_px
             ));
         }
         if let Some(widths) = e

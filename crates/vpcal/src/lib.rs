@@ -13,6 +13,7 @@
 //! - [`model`]: the bundled VP network.
 //! - [`progress`]: progress reports of long work.
 //! - [`road`]: metric measurements on the road plane (scale, road points, distances).
+//! - [`road_focal`]: the focal length from known road lengths in two directions.
 //! - [`plausible`]: what traffic cameras and road traffic can be (a calibration's status).
 //! - [`label`]: self-labelled training crops from real footage (`vpcal label`).
 //!
@@ -33,6 +34,7 @@ pub mod plausible;
 pub mod progress;
 pub mod report;
 pub mod road;
+pub mod road_focal;
 pub mod tracks;
 
 pub use pipeline::{calibrate, run_pipeline, run_pipeline_on, PipelineConfig, PipelineOutput};

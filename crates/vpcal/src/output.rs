@@ -15,7 +15,7 @@ use vpcal_video::{SourceKind, Start};
 
 use crate::aggregate::{aggregate, check_focal_settings, edgelets_of, Aggregated, Method};
 use crate::pipeline::{PipelineConfig, PipelineOutput, PrincipalPoint};
-use crate::road::{scale_from_points, KnownDistance};
+use crate::road::{KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
 use crate::tracks::{build_tracks, summary, TrackSettings, VehicleTrack};
 
 /// How calibration files name a kind of input.
@@ -120,7 +120,9 @@ pub fn aggregated_file(
 
 /// [`calibration_file`] with the metric scale of `known` (`calibrate --scale-points`) when
 /// given, else the automatic scale from the vehicles' sizes ([`crate::autoscale`]) when
-/// enough vehicles fit a car-shaped box; returns the file and the scale.
+/// enough vehicles fit a car-shaped box; returns the file, the scale and the camera. Known
+/// lengths in two directions also measure the focal length ([`RoadCamera::refit_focal`]):
+/// the camera returned is then the refitted one.
 ///
 /// # Errors
 /// Pixels of `known` that do not fix a scale (above the horizon, coinciding).
@@ -129,19 +131,29 @@ pub fn calibrated_run_file(
     config: &PipelineConfig,
     cal: &Calibration,
     agg: &Aggregated,
-    known: Option<KnownDistance>,
-) -> Result<(CalibrationFile, Option<f64>)> {
-    let mut file = calibration_file(out, config, cal, agg);
-    let Some(k) = known else {
+    known: &[KnownDistance],
+) -> Result<(CalibrationFile, Option<f64>, Calibration)> {
+    let file = calibration_file(out, config, cal, agg);
+    if known.is_empty() {
+        let mut file = file;
         let boxes = crate::tracks::record_boxes(&out.records);
         let size = (out.info.width, out.info.height);
         let scale = set_vehicle_scale(&mut file, &boxes, size, cal, agg)?;
-        return Ok((file, scale));
-    };
-    let (scale, reference) = scale_from_points(cal, k.p1, k.p2, k.distance_m, "--scale-points")?;
-    file.set_scale(scale, Some(reference))
-        .map_err(anyhow::Error::msg)?;
-    Ok((file, Some(scale)))
+        return Ok((file, scale, cal.clone()));
+    }
+    let inputs: Vec<ScaleInput> = known
+        .iter()
+        .map(|k| ScaleInput {
+            kind: RoadMeasure::Distance,
+            known: *k,
+        })
+        .collect();
+    let flag = |i: usize| format!("--scale-points #{}", i + 1);
+    let mut road = RoadCamera::new(file, "the calibration")?;
+    crate::road::fit_scale(&road.cal, &inputs, flag)?;
+    road.refit_focal(&inputs);
+    let fit = road.fit_and_set_scale(&inputs, flag, "the calibration")?;
+    Ok((road.file, Some(fit.scale), road.cal))
 }
 
 /// Everything a calibrated run writes: the calibration file (its status after the
@@ -149,6 +161,9 @@ pub fn calibrated_run_file(
 #[derive(Debug)]
 pub struct CalibratedRun {
     pub file: CalibrationFile,
+    /// The camera of `file`: the aggregation's, or with the focal length known lengths
+    /// measured.
+    pub camera: Calibration,
     pub scale: Option<f64>,
     pub tracks: Vec<VehicleTrack>,
     pub header: TracksHeader,
@@ -165,21 +180,22 @@ pub fn calibrated_run(
     config: &PipelineConfig,
     cal: &Calibration,
     agg: &Aggregated,
-    known: Option<KnownDistance>,
+    known: &[KnownDistance],
 ) -> Result<CalibratedRun> {
-    let (mut file, scale) = calibrated_run_file(out, config, cal, agg, known)?;
+    let (mut file, scale, camera) = calibrated_run_file(out, config, cal, agg, known)?;
     let curved = agg.robust_evidence.as_ref().is_some_and(|e| e.road_curved);
-    let (tracks, mut header) = run_tracks(out, scale.map(|s| (cal, s)), true, curved);
+    let (tracks, mut header) = run_tracks(out, scale.map(|s| (&camera, s)), true, curved);
     if curved && scale.is_some() {
         header.note = Some("the road curves: tracks without lanes".to_string());
     }
     header.speed_factor = Some(crate::plausible::along_factor(&file));
-    let camera = crate::plausible::check_camera(&file);
-    file.replace_checks(crate::plausible::CAMERA_CHECK, camera);
+    let camera_checks = crate::plausible::check_camera(&file);
+    file.replace_checks(crate::plausible::CAMERA_CHECK, camera_checks);
     let speeds = crate::plausible::check_speeds(&tracks, &file, config.frames.image_fps.is_some());
     file.replace_checks(crate::plausible::SPEEDS_CHECK, speeds);
     Ok(CalibratedRun {
         file,
+        camera,
         scale,
         tracks,
         header,

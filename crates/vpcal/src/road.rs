@@ -1,7 +1,8 @@
 //! Metric measurements on the road plane of a calibration: the scale from one known
 //! distance, image points to road points in metres and back, distances between pixels.
 //!
-//! Used by `vpcal scale`, `vpcal measure`, `calibrate --scale-points` and the Python package.
+//! Used by `vpcal scale`, `vpcal measure`, `calibrate --scale-points` and the Python package;
+//! known lengths in two directions also measure the focal length ([`crate::road_focal`]).
 
 use std::path::Path;
 
@@ -9,6 +10,8 @@ use anyhow::{bail, Result};
 use vpcal_formats::calib::{CalibrationFile, ScaleReference};
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::Point2;
+
+use crate::road_focal::LengthFocalFit;
 
 /// A calibration file, the camera it describes and its metric scale (metres per road unit).
 #[derive(Debug, Clone)]
@@ -147,6 +150,114 @@ impl RoadCamera {
         Ok(fit)
     }
 
+    /// Measure the focal length from known lengths `inputs` in two directions
+    /// ([`crate::road_focal`]), combine it with the file's own ([`crate::road_focal::combine`])
+    /// and make the result the file's camera (`focal_source: distances`, or
+    /// `distances+<source>` where both carried it), with `evidence.distances_focal`. A given
+    /// focal length (`--focal`) stays, and so does an assumed one the lengths cannot narrow.
+    /// Call [`RoadCamera::fit_and_set_scale`] next: the scale is gone with the old camera.
+    pub fn refit_focal(&mut self, inputs: &[ScaleInput]) -> FocalRefit {
+        use crate::road_focal::{combine, fit_focal_from_lengths, CameraSpread, PriorFocal};
+        let width = f64::from(self.file.image_size[0]);
+        let width = if width > 0.0 {
+            width
+        } else {
+            2.0 * self.cal.pp.x
+        };
+        let measured = self.file.confidence.as_ref().map(|c| CameraSpread {
+            vp1_sd_px: c.vp1_sd_px,
+            horizon_angle_sd_deg: c.horizon_angle_sd_deg,
+        });
+        let fit = fit_focal_from_lengths(
+            &self.cal,
+            inputs,
+            CameraSpread::floored(measured, width),
+            width,
+        );
+        let prior = PriorFocal {
+            focal_px: self.cal.focal_px,
+            interval_px: self.file.focal_interval_px,
+            source: self
+                .file
+                .focal_source
+                .clone()
+                .unwrap_or_else(|| "unknown".to_string()),
+        };
+        let m = match fit {
+            LengthFocalFit::NotIdentified(why) => return FocalRefit::Kept(why),
+            LengthFocalFit::Measured(m) => m,
+        };
+        let Some(c) = combine(&m, &prior) else {
+            let why = if prior.source == "given" {
+                format!(
+                    "the focal length was given (--focal); the lengths alone give {:.0} px \
+                     (68% {:.0}-{:.0})",
+                    m.focal_px, m.interval_px[0], m.interval_px[1]
+                )
+            } else {
+                format!(
+                    "the lengths give {:.0} px but only to 68% {:.0}-{:.0} px, no narrower than \
+                     the assumed range",
+                    m.focal_px, m.interval_px[0], m.interval_px[1]
+                )
+            };
+            return FocalRefit::Kept(why);
+        };
+        let Some(camera) = crate::road_focal::camera_with_focal(&self.cal, c.focal_px) else {
+            return FocalRefit::Kept("the combined focal length gives no camera".to_string());
+        };
+        let clause = format!(
+            "{} known lengths: {:.0} px (68% {:.0}-{:.0} px), with the footage's {:.0} px \
+             ({}): {:.0} px ({}, 68% {:.0}-{:.0} px)",
+            inputs.len(),
+            m.focal_px,
+            m.interval_px[0],
+            m.interval_px[1],
+            prior.focal_px,
+            prior.source,
+            c.focal_px,
+            c.source,
+            c.interval_px[0],
+            c.interval_px[1]
+        );
+        if self
+            .file
+            .set_measured_camera(&camera, &c.source, c.interval_px, &clause)
+            .is_err()
+        {
+            return FocalRefit::Kept("the file has no camera".to_string());
+        }
+        let evidence = self
+            .file
+            .evidence
+            .get_or_insert_with(|| serde_json::Value::Object(serde_json::Map::new()));
+        if let serde_json::Value::Object(e) = evidence {
+            e.insert(
+                "distances_focal".to_string(),
+                serde_json::json!({
+                    "focal_px": m.focal_px,
+                    "interval_px": m.interval_px,
+                    "lengths": inputs.len(),
+                    "chi2": m.chi2,
+                    "dof": m.dof,
+                    "lengths_share": c.lengths_share,
+                    "previous_focal_px": prior.focal_px,
+                    "previous_focal_interval_px": prior.interval_px,
+                    "previous_focal_source": prior.source,
+                }),
+            );
+        }
+        if let Some(w) = &c.disagreement {
+            self.file.warnings.push(w.clone());
+        }
+        self.cal = camera;
+        self.scale = None;
+        FocalRefit::Measured {
+            lengths: m,
+            combined: c,
+        }
+    }
+
     /// The pixel that sees road-frame point `q` (the inverse of [`RoadCamera::road_point`]);
     /// `None` behind the camera.
     pub fn pixel(&self, q: [f64; 2]) -> Option<Point2> {
@@ -155,37 +266,22 @@ impl RoadCamera {
     }
 }
 
+/// What [`RoadCamera::refit_focal`] did with the focal length.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FocalRefit {
+    /// The lengths measured it (`lengths`), and the file took `combined`.
+    Measured {
+        lengths: crate::road_focal::LengthFocal,
+        combined: crate::road_focal::CombinedFocal,
+    },
+    /// The file keeps its focal length, for this reason.
+    Kept(String),
+}
+
 /// Pixels closer than this below the horizon are measured with a warning: there a pixel's
 /// error of 1 px moves its distance from the camera by more than `1 / NEAR_HORIZON_PX`
 /// (5 %), since that distance grows as the inverse of the pixel's height below the horizon.
 pub const NEAR_HORIZON_PX: f64 = 20.0;
-
-/// The metric scale that makes the road distance between pixels `p1` and `p2` equal
-/// `distance_m`, with its reference for the calibration file. `flag` names the option the
-/// pixels came from in errors.
-///
-/// # Errors
-/// A distance that is not a positive number, a pixel above the horizon, coinciding points.
-pub fn scale_from_points(
-    cal: &Calibration,
-    p1: Point2,
-    p2: Point2,
-    distance_m: f64,
-    flag: &str,
-) -> Result<(f64, ScaleReference)> {
-    let input = ScaleInput {
-        kind: RoadMeasure::Distance,
-        known: KnownDistance { p1, p2, distance_m },
-    };
-    let fit = fit_scale(cal, &[input], |_| flag.to_string())?;
-    Ok((
-        fit.scale,
-        ScaleReference {
-            points: [[p1.x, p1.y], [p2.x, p2.y]],
-            distance_m,
-        },
-    ))
-}
 
 /// Two pixels on the road and the distance between them (a taped distance, lane markings).
 #[derive(Debug, Clone, Copy, PartialEq)]

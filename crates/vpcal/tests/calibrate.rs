@@ -440,6 +440,7 @@ fn several_distances_and_lane_widths_give_one_scale_with_residuals() {
         "300,600,900,640",
         "--distance",
         &d2s,
+        "--keep-focal",
         "--json",
     ]));
     let s = v["scale_m_per_unit"].as_f64().unwrap();
@@ -484,6 +485,65 @@ fn several_distances_and_lane_widths_give_one_scale_with_residuals() {
     assert!(!r.status.success());
     assert!(text(&r).contains("across"), "{}", text(&r));
     assert_eq!(std::fs::read(&calib).unwrap(), before);
+}
+
+#[test]
+fn known_lengths_along_and_across_the_road_measure_the_focal_length() {
+    use vpcal_geom::Point2;
+    let dir = tempfile::tempdir().unwrap();
+    let calib = dir.path().join("calib.json");
+    write_known_calib(&calib);
+    let c = calib.to_str().unwrap();
+    // The true camera has the file's VP1 and horizon but f = 1400 px (the file says 1000):
+    // road points 12 m along and 3.5 m across, seen through it (0.05 m per unit).
+    let file = vpcal::CalibrationFile::read(&calib).unwrap();
+    let truth = vpcal::road_focal::camera_with_focal(&file.camera().unwrap(), 1400.0).unwrap();
+    let s = 0.05;
+    let o = truth.road_point(Point2::new(600.0, 600.0)).unwrap();
+    let px = |dx: f64, dy: f64| {
+        let p = truth
+            .pixel_of_road_point([o[0] + dx / s, o[1] + dy / s])
+            .unwrap();
+        format!("{},{}", p.x, p.y)
+    };
+    let pair = |a: String, b: String| format!("{a},{b}");
+    let along = pair(px(0.0, 0.0), px(12.0, 0.0));
+    let across = pair(px(0.0, 0.0), px(0.0, 3.5));
+    let run = |extra: &[&str]| {
+        let mut a = vec!["scale", c, "--points", &along, "--distance", "12"];
+        a.extend_from_slice(extra);
+        a.push("--json");
+        let r = vpcal(&a);
+        assert!(r.status.success(), "{}", text(&r));
+        serde_json::from_slice::<serde_json::Value>(&r.stdout).unwrap()
+    };
+    // One direction fixes only the scale, and says so.
+    let v = run(&[]);
+    assert_eq!(v["focal"]["changed"], false, "{v}");
+    assert!((v["focal"]["focal_px"].as_f64().unwrap() - 1000.0).abs() < 1e-6);
+    // Across too: the focal length is measured, and a diagonal then measures true.
+    let v = run(&["--points", &across, "--distance", "3.5"]);
+    assert_eq!(v["focal"]["changed"], true, "{v}");
+    let f = v["focal"]["focal_px"].as_f64().unwrap();
+    assert!((f / 1400.0 - 1.0).abs() < 1e-3, "{v}");
+    let doc = read_json(&calib);
+    assert_eq!(doc["focal_source"], "distances");
+    assert!((doc["focal_px"].as_f64().unwrap() - f).abs() < 1e-6);
+    let [lo, hi] = [0, 1].map(|i| doc["focal_interval_px"][i].as_f64().unwrap());
+    assert!(lo < 1400.0 && 1400.0 < hi && hi / lo < 1.5, "{lo}-{hi}");
+    assert!(doc["evidence"]["distances_focal"]["lengths"] == 2, "{doc}");
+    assert!((doc["scale_m_per_unit"].as_f64().unwrap() / s - 1.0).abs() < 1e-3);
+    let diagonal = pair(px(0.0, 0.0), px(9.0, 3.0));
+    let m = vpcal(&["measure", c, "--points", &diagonal, "--json"]);
+    assert!(m.status.success(), "{}", text(&m));
+    let m: serde_json::Value = serde_json::from_slice(&m.stdout).unwrap();
+    let d = m[0]["distance"].as_f64().unwrap();
+    assert!((d - 90f64.hypot(30.0) / 10.0).abs() < 0.01, "{d}");
+    // --keep-focal keeps the file's.
+    write_known_calib(&calib);
+    let v = run(&["--points", &across, "--distance", "3.5", "--keep-focal"]);
+    assert_eq!(v["focal"]["changed"], false);
+    assert!((read_json(&calib)["focal_px"].as_f64().unwrap() - 1000.0).abs() < 1e-6);
 }
 
 #[test]

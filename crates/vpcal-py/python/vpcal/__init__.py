@@ -707,12 +707,14 @@ class Calibration:
         *,
         distances: Sequence[Tuple[Sequence[float], float]] = (),
         lane_widths: Sequence[Tuple[Sequence[float], float]] = (),
+        keep_focal: bool = False,
     ) -> "Calibration":
         """A copy with the metric scale of known lengths on the road, as ``vpcal scale``:
         ``points`` (x1, y1, x2, y2 pixels) ``distance`` metres apart, more such pairs in
         ``distances``, and ``lane_widths``: pairs of pixels on two neighbouring lane lines
         with the lane's width (only the part across the road counts). Several give their
-        geometric mean."""
+        geometric mean. Lengths in two directions (along and across the road) also measure
+        the focal length (``focal_source`` ``distances``), unless ``keep_focal``."""
         def pair(p: Sequence[float], name: str) -> Tuple[float, float, float, float]:
             t = tuple(float(v) for v in p)
             if len(t) != 4:
@@ -727,7 +729,7 @@ class Calibration:
         widths = [(pair(p, "lane_widths"), float(w)) for p, w in lane_widths]
         if not known and not widths:
             raise TypeError("with_scale: give points and distance, distances or lane_widths")
-        text = _native.set_scale(self._text(), known, widths)
+        text = _native.set_scale(self._text(), known, widths, keep_focal)
         return Calibration(
             json.loads(text),
             tracks=self._tracks,

@@ -48,9 +48,12 @@ def write_calibration(text: str, path: str) -> None:
 
 KnownLength = Tuple[Tuple[float, float, float, float], float]
 
-def set_scale(text: str, distances: List[KnownLength], widths: List[KnownLength] = ...) -> str:
+def set_scale(
+    text: str, distances: List[KnownLength], widths: List[KnownLength] = ..., keep_focal: bool = ...
+) -> str:
     """The calibration with the metric scale of known road distances and lane widths
-    (``vpcal scale``)."""
+    (``vpcal scale``); lengths in two directions also measure the focal length unless
+    ``keep_focal``."""
 
 class RoadCamera:
     def __init__(self, text: str) -> None: ...

@@ -54,12 +54,13 @@ pub struct Args {
     pub tracks: Option<PathBuf>,
     /// Two road points a known distance apart, pixels x1,y1,x2,y2 (as `vpcal scale
     /// --points`): gives the calibration its metric scale, the tracks their speeds, the
-    /// BrnoCompSpeed file its scale.
+    /// BrnoCompSpeed file its scale. Repeat (each with its --scale-distance) for several; a
+    /// length along the road and one across it also measure the focal length.
     #[arg(long, value_name = "X1,Y1,X2,Y2", value_parser = parse_points, allow_hyphen_values = true, requires = "scale_distance")]
-    pub scale_points: Option<[f64; 4]>,
-    /// The distance between --scale-points on the road, metres.
+    pub scale_points: Vec<[f64; 4]>,
+    /// The distance between --scale-points on the road, metres; one per --scale-points.
     #[arg(long, value_name = "M", requires = "scale_points", value_parser = super::args::positive_f64, allow_negative_numbers = true)]
-    pub scale_distance: Option<f64>,
+    pub scale_distance: Vec<f64>,
     /// Also write a frame with the horizon, vehicle VP directions and a road grid (PNG).
     #[arg(long, value_name = "PNG")]
     pub overlay: Option<PathBuf>,
@@ -461,13 +462,13 @@ pub fn run(args: Args) -> Result<Exit> {
         check_destination(flag, path)?;
     }
     check_distinct_paths(&args.input_paths(), &args.output_paths()).map_err(UsageError)?;
-    if let Some(d) = args.scale_distance {
-        if !(d.is_finite() && d > 0.0) {
-            return Err(UsageError(format!(
-                "--scale-distance {d}: expected a positive number of metres"
-            ))
-            .into());
-        }
+    if args.scale_points.len() != args.scale_distance.len() {
+        return Err(UsageError(format!(
+            "{} --scale-points but {} --scale-distance: give one distance per pair of points",
+            args.scale_points.len(),
+            args.scale_distance.len()
+        ))
+        .into());
     }
     let config = args.pipeline.config()?;
     let bar = super::FrameBar::new("frames", args.pipeline.quiet);
@@ -493,20 +494,37 @@ pub fn run(args: Args) -> Result<Exit> {
     };
     match result {
         Ok((cal, agg)) => {
-            let known = args
+            let known: Vec<KnownDistance> = args
                 .scale_points
-                .zip(args.scale_distance)
+                .iter()
+                .zip(&args.scale_distance)
                 .map(|(p, d)| KnownDistance {
                     p1: Point2::new(p[0], p[1]),
                     p2: Point2::new(p[2], p[3]),
-                    distance_m: d,
-                });
+                    distance_m: *d,
+                })
+                .collect();
             let output::CalibratedRun {
                 file: doc,
+                camera: cal,
                 scale,
                 tracks,
                 header,
-            } = output::calibrated_run(&out, &config, &cal, &agg, known)?;
+            } = output::calibrated_run(&out, &config, &cal, &agg, &known)?;
+            if let Some(d) = doc.evidence.as_ref().and_then(|e| e.get("distances_focal")) {
+                let iv = doc.focal_interval_px.unwrap_or([f64::NAN; 2]);
+                eprintln!(
+                    "  {:<22} {:.0} px (68% {:.0}-{:.0} px, {}); the known lengths alone {:.0} px",
+                    "focal length, refit",
+                    cal.focal_px,
+                    iv[0],
+                    iv[1],
+                    doc.focal_source.as_deref().unwrap_or("?"),
+                    d.get("focal_px")
+                        .and_then(|v| v.as_f64())
+                        .unwrap_or(f64::NAN)
+                );
+            }
             if let (Some(s), Some(source)) = (scale, doc.scale_source.as_deref()) {
                 let height = doc.camera_height_m.unwrap_or(f64::NAN);
                 let interval = doc

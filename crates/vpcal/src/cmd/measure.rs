@@ -3,14 +3,16 @@
 //! A calibration from vanishing points fixes the road plane up to scale (DESIGN.md §3: the
 //! BrnoCompSpeed back-projection onto `n·X + 10 = 0`). Known distances between road points,
 //! or lane widths, fix the scale (`scale_m_per_unit`; several: their geometric mean, each
-//! with its residual); then any pair of pixels on the road has a distance in metres, and any
-//! road pixel a place on the road.
+//! with its residual); lengths in two directions (along and across the road) also measure
+//! the focal length (`vpcal::road_focal`); then any pair of pixels on the road has a
+//! distance in metres, and any road pixel a place on the road.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use serde_json::Value;
-use vpcal::road::{KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
+use vpcal::road::{FocalRefit, KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
+
 use vpcal_geom::Point2;
 
 /// Two road points in pixels, `x1,y1,x2,y2`.
@@ -36,7 +38,10 @@ fn parse_pair(s: &str) -> Result<PointPair, String> {
 #[command(
     after_help = "Examples (pixels read off a frame of the clip, e.g. the overlay):\n  \
     vpcal scale calib.json --points 412,610,530,598 --distance 6.0\n  \
-    vpcal scale calib.json --lane-points 300,650,420,655 --lane-width 3.5\n\n\
+    vpcal scale calib.json --lane-points 300,650,420,655 --lane-width 3.5\n  \
+    # a length along the road and one across it also measure the focal length:\n  \
+    vpcal scale calib.json --points 412,610,530,598 --distance 6.0 \\\n      \
+    --points 380,640,520,645 --distance 3.5\n\n\
 Exit codes: 0 done; 1 an error (a pixel above the horizon, a file without a camera); 2 a wrong \
 command line."
 )]
@@ -57,6 +62,10 @@ pub struct ScaleArgs {
     /// The lane width, metres: one for every --lane-points, or one per --lane-points.
     #[arg(long, value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub lane_width: Vec<f64>,
+    /// Keep the calibration's focal length even when the lengths lie in two directions (by
+    /// default they measure it: `focal_source: distances`).
+    #[arg(long)]
+    pub keep_focal: bool,
     /// Write the scaled calibration here (default: update CALIB in place, atomically).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
@@ -152,17 +161,18 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
     let inputs = scale_inputs(&a)?;
     let mut f = RoadCamera::read(&a.calib)?;
     let n_dist = a.points.len();
-    let fit = f.fit_and_set_scale(
-        &inputs,
-        |i| {
-            if i < n_dist {
-                format!("--points #{}", i + 1)
-            } else {
-                format!("--lane-points #{}", i - n_dist + 1)
-            }
-        },
-        &a.calib.display().to_string(),
-    )?;
+    let flag_of = |i: usize| {
+        if i < n_dist {
+            format!("--points #{}", i + 1)
+        } else {
+            format!("--lane-points #{}", i - n_dist + 1)
+        }
+    };
+    // Every length is checked on the file's camera before anything changes.
+    vpcal::road::fit_scale(&f.cal, &inputs, flag_of)?;
+    let before = (f.cal.focal_px, f.file.focal_source.clone());
+    let focal = (!a.keep_focal).then(|| f.refit_focal(&inputs));
+    let fit = f.fit_and_set_scale(&inputs, flag_of, &a.calib.display().to_string())?;
     let out = a.output.as_deref().unwrap_or(&a.calib);
     f.file.write(out)?;
     let height = f.file.camera_height_m.unwrap_or(f64::NAN);
@@ -188,6 +198,7 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
+                "focal": focal_json(focal.as_ref(), &f, &before),
                 "scale_m_per_unit": fit.scale,
                 "scale_source": fit.source,
                 "camera_height_m": height,
@@ -201,6 +212,7 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
             fit.scale,
             out.display()
         );
+        println!("{}", focal_line(focal.as_ref(), &f, &before));
         if inputs.len() > 1 {
             for (i, m) in inputs.iter().enumerate() {
                 println!(
@@ -214,6 +226,66 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// What `vpcal scale` did with the focal length, in words: measured from the lengths, or kept
+/// and why. `before` is the file's focal length and source before.
+fn focal_line(
+    refit: Option<&FocalRefit>,
+    f: &RoadCamera,
+    before: &(f64, Option<String>),
+) -> String {
+    let source = before.1.as_deref().unwrap_or("unknown source");
+    match refit {
+        Some(FocalRefit::Measured { lengths, combined }) => format!(
+            "focal length {:.0} px (68% {:.0}-{:.0} px, {}): the known lengths give {:.0} px \
+             (68% {:.0}-{:.0}), the footage gave {:.0} px ({source})",
+            combined.focal_px,
+            combined.interval_px[0],
+            combined.interval_px[1],
+            combined.source,
+            lengths.focal_px,
+            lengths.interval_px[0],
+            lengths.interval_px[1],
+            before.0
+        ),
+        Some(FocalRefit::Kept(why)) => format!(
+            "focal length kept: {:.0} px ({source}); {why}",
+            f.cal.focal_px
+        ),
+        None => format!(
+            "focal length kept: {:.0} px ({source}; --keep-focal)",
+            f.cal.focal_px
+        ),
+    }
+}
+
+/// [`focal_line`] as JSON: whether the lengths changed it, the focal length, its interval
+/// and source now, the lengths' own, what it was, and why it was kept.
+fn focal_json(refit: Option<&FocalRefit>, f: &RoadCamera, before: &(f64, Option<String>)) -> Value {
+    let (why, lengths) = match refit {
+        Some(FocalRefit::Kept(why)) => (Some(why.clone()), None),
+        None => (Some("--keep-focal".to_string()), None),
+        Some(FocalRefit::Measured { lengths, .. }) => (
+            None,
+            Some(serde_json::json!({
+                "focal_px": lengths.focal_px,
+                "interval_px": lengths.interval_px,
+                "chi2": lengths.chi2,
+                "dof": lengths.dof,
+            })),
+        ),
+    };
+    serde_json::json!({
+        "changed": why.is_none(),
+        "focal_px": f.cal.focal_px,
+        "focal_interval_px": f.file.focal_interval_px,
+        "focal_source": f.file.focal_source,
+        "from_lengths": lengths,
+        "previous_focal_px": before.0,
+        "previous_focal_source": before.1,
+        "kept_because": why,
+    })
 }
 
 pub fn run_measure(a: MeasureArgs) -> Result<()> {

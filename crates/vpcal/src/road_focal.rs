@@ -1,0 +1,657 @@
+//! The focal length from known road lengths in two directions (`vpcal scale` with a length
+//! along the road and one across it, `calibrate --scale-points` given twice).
+//!
+//! The road plane's metric follows from the horizon, the principal point and `f` alone: its
+//! normal is `∝ Kᵀh`, whatever VP1 is (VP1 only names the along axis). Lengths on parallel
+//! lines keep their ratios for every `f` (ratios along one direction are invariant under the
+//! affine part of the rectification), so lengths in one direction fix only the scale. A
+//! length in another direction (across the road, a lane width, a diagonal) changes its ratio
+//! to the first as `f` changes: the focal length is the one at which every known length
+//! agrees with one scale. VP1 and the horizon stay; VP2 moves along the horizon to the point
+//! orthogonal to VP1 for that `f` (as `--focal` does).
+//!
+//! The fit minimises, over `ln f`, the weighted spread of the lengths' own log scales
+//! (`ln(known / measured)`), each weighted by the inverse variance of its clicks
+//! ([`CLICK_SD_PX`] per coordinate) and its known length ([`DISTANCE_REL_SD`],
+//! [`LANE_WIDTH_REL_SD`]). The 68 % interval propagates those and the camera's own spread (VP1
+//! and the horizon's angle, floored at what the synthetic suite measured: [`HORIZON_SD_FLOOR_DEG`],
+//! [`VP1_SD_FLOOR_WIDTHS`]) by refitting with each one moved by its standard deviation.
+//! The focal length counts as measured only where the fit is identified: its minimum lies
+//! inside the search range and moving `f` by a factor of two either way raises the misfit by
+//! at least [`IDENTIFIED_DELTA_CHI2`].
+
+use vpcal_geom::camera::{orthogonal_vp_on_line, Calibration};
+use vpcal_geom::{Line, Point2};
+
+use crate::road::{RoadMeasure, ScaleInput};
+
+/// Standard deviation of a clicked pixel, per coordinate: a person marking the ends of a lane
+/// line or a taped distance on a frame.
+pub const CLICK_SD_PX: f64 = 1.0;
+
+/// Relative standard deviation of a known distance (taped, or read off a plan).
+pub const DISTANCE_REL_SD: f64 = 0.01;
+
+/// Relative standard deviation of a known lane width: a road's lanes are built to their
+/// standard within a few centimetres, but which standard (3.5 m against 3.75 m) is often
+/// read from the road class.
+pub const LANE_WIDTH_REL_SD: f64 = 0.03;
+
+/// The least standard deviation of the horizon's angle used in the interval, degrees. The
+/// bootstrap's own spread underestimates it: on the synthetic suite (true boxes, 100 frames,
+/// `scripts/suite_focal.sh`) the straight and intersection scenes' horizons erred by
+/// 0.22-1.46° (median 0.43°) where the bootstrap said 0.07-0.28°.
+pub const HORIZON_SD_FLOOR_DEG: f64 = 0.5;
+
+/// The least standard deviation of VP1 used in the interval, image widths: the same scenes'
+/// VP1 erred by 0.3-12 px at 1280 px (median 1.2 px) where the bootstrap said 0.
+pub const VP1_SD_FLOOR_WIDTHS: f64 = 0.002;
+
+/// How much the misfit (χ², in the lengths' standard deviations) must rise when `f` moves by
+/// a factor of two either way for the lengths to count as fixing it: two standard deviations.
+pub const IDENTIFIED_DELTA_CHI2: f64 = 4.0;
+
+/// The focal lengths searched, image widths: far beyond any traffic camera's (a fisheye's
+/// 0.3 widths to a 20-width telephoto).
+pub const SEARCH_RANGE_WIDTHS: [f64; 2] = [0.1, 20.0];
+
+/// How well the camera's VP1 and horizon are known (standard deviations), for the interval.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraSpread {
+    pub vp1_sd_px: f64,
+    pub horizon_angle_sd_deg: f64,
+}
+
+impl CameraSpread {
+    /// The calibration's bootstrap spread (`None`: none measured), floored at
+    /// [`VP1_SD_FLOOR_WIDTHS`] and [`HORIZON_SD_FLOOR_DEG`] for frames `width` pixels wide.
+    pub fn floored(measured: Option<CameraSpread>, width: f64) -> CameraSpread {
+        let m = measured.unwrap_or(CameraSpread {
+            vp1_sd_px: 0.0,
+            horizon_angle_sd_deg: 0.0,
+        });
+        let at_least = |v: f64, floor: f64| if v.is_finite() { v.max(floor) } else { floor };
+        CameraSpread {
+            vp1_sd_px: at_least(m.vp1_sd_px, VP1_SD_FLOOR_WIDTHS * width),
+            horizon_angle_sd_deg: at_least(m.horizon_angle_sd_deg, HORIZON_SD_FLOOR_DEG),
+        }
+    }
+}
+
+/// The focal length the known lengths give, with the camera it makes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LengthFocal {
+    pub focal_px: f64,
+    /// 68 % interval, pixels: `f · exp(±log_sd)`.
+    pub interval_px: [f64; 2],
+    pub log_sd: f64,
+    /// The camera with this focal length: VP1 and the horizon as before, VP2 moved.
+    pub camera: Calibration,
+    /// The weighted misfit at the minimum (χ²; 0 for two lengths, which fit exactly) and its
+    /// degrees of freedom (lengths minus two).
+    pub chi2: f64,
+    pub dof: usize,
+}
+
+/// What the known lengths say about the focal length.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LengthFocalFit {
+    Measured(LengthFocal),
+    /// They do not fix it, and why (one direction only; no focal length explains them).
+    NotIdentified(String),
+}
+
+/// The camera of `cal` with focal length `focal_px`: VP1, the horizon and the principal
+/// point stay, VP2 is the point of the horizon orthogonal to VP1. `None` where none is.
+pub fn camera_with_focal(cal: &Calibration, focal_px: f64) -> Option<Calibration> {
+    with_focal(cal.vp1, cal.horizon, cal.pp, focal_px)
+}
+
+fn with_focal(vp1: Point2, horizon: Line, pp: Point2, focal_px: f64) -> Option<Calibration> {
+    let vp2 = orthogonal_vp_on_line(vp1, horizon, focal_px, pp)?;
+    Calibration::from_vps(vp1, vp2, pp).ok()
+}
+
+/// The length measurement `m` measures on camera `cal`, road units; `None` when a pixel does
+/// not see the road or the length is zero.
+fn units(cal: &Calibration, m: &ScaleInput) -> Option<f64> {
+    let a = cal.road_point(m.known.p1)?;
+    let b = cal.road_point(m.known.p2)?;
+    let u = match m.kind {
+        RoadMeasure::Distance => (a[0] - b[0]).hypot(a[1] - b[1]),
+        RoadMeasure::LaneWidth => (a[1] - b[1]).abs(),
+    };
+    (u.is_finite() && u > 0.0).then_some(u)
+}
+
+/// The variance of `ln(measured length)` of each input on `cal`: its clicks (numerically,
+/// [`CLICK_SD_PX`] per coordinate) and its known length's relative error.
+fn log_variances(cal: &Calibration, inputs: &[ScaleInput]) -> Option<Vec<f64>> {
+    inputs
+        .iter()
+        .map(|m| {
+            let base = units(cal, m)?.ln();
+            let mut var = 0.0;
+            for coord in 0..4 {
+                let mut moved = *m;
+                let h = CLICK_SD_PX;
+                let p = if coord < 2 {
+                    &mut moved.known.p1
+                } else {
+                    &mut moved.known.p2
+                };
+                if coord % 2 == 0 {
+                    p.x += h;
+                } else {
+                    p.y += h;
+                }
+                let d = units(cal, &moved).map_or(0.0, |u| u.ln() - base);
+                var += d * d;
+            }
+            let rel = match m.kind {
+                RoadMeasure::Distance => DISTANCE_REL_SD,
+                RoadMeasure::LaneWidth => LANE_WIDTH_REL_SD,
+            };
+            Some(var + rel * rel)
+        })
+        .collect()
+}
+
+/// The weighted misfit of the inputs on the camera with focal length `f`: `Σ w_i (l_i -
+/// l̄)²` over the lengths' own log scales `l_i = ln(known / measured)`; `None` where the
+/// camera or a length does not exist.
+fn misfit(
+    vp1: Point2,
+    horizon: Line,
+    pp: Point2,
+    inputs: &[ScaleInput],
+    weights: &[f64],
+    f: f64,
+) -> Option<f64> {
+    let cal = with_focal(vp1, horizon, pp, f)?;
+    let logs: Vec<f64> = inputs
+        .iter()
+        .map(|m| units(&cal, m).map(|u| (m.known.distance_m / u).ln()))
+        .collect::<Option<_>>()?;
+    let wsum: f64 = weights.iter().sum();
+    let mean = logs.iter().zip(weights).map(|(l, w)| l * w).sum::<f64>() / wsum;
+    Some(
+        logs.iter()
+            .zip(weights)
+            .map(|(l, w)| w * (l - mean).powi(2))
+            .sum(),
+    )
+}
+
+/// The `ln f` of least misfit over `[lo, hi]` (logs of pixels) and the misfit there: a grid,
+/// then a golden-section search around its best point. `None` where no camera exists.
+fn best_log_focal(cost: &dyn Fn(f64) -> Option<f64>, lo: f64, hi: f64) -> Option<(f64, f64)> {
+    const STEPS: usize = 400;
+    let step = (hi - lo) / STEPS as f64;
+    let at = |x: f64| cost(x.exp()).unwrap_or(f64::INFINITY);
+    let (mut best_x, mut best_c) = (lo, f64::INFINITY);
+    for i in 0..=STEPS {
+        let x = lo + step * i as f64;
+        let c = at(x);
+        if c < best_c {
+            (best_x, best_c) = (x, c);
+        }
+    }
+    if !best_c.is_finite() {
+        return None;
+    }
+    let (mut a, mut b) = ((best_x - step).max(lo), (best_x + step).min(hi));
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    for _ in 0..60 {
+        let (x1, x2) = (b - g * (b - a), a + g * (b - a));
+        if at(x1) < at(x2) {
+            b = x2;
+        } else {
+            a = x1;
+        }
+    }
+    let x = 0.5 * (a + b);
+    let c = at(x);
+    Some(if c <= best_c {
+        (x, c)
+    } else {
+        (best_x, best_c)
+    })
+}
+
+/// The focal length the known lengths `inputs` give on camera `cal` (frames `width` pixels
+/// wide), with the camera's spread `spread` for the interval. See the module docs.
+pub fn fit_focal_from_lengths(
+    cal: &Calibration,
+    inputs: &[ScaleInput],
+    spread: CameraSpread,
+    width: f64,
+) -> LengthFocalFit {
+    if inputs.len() < 2 {
+        return LengthFocalFit::NotIdentified(
+            "one known length fixes only the scale; give a second one in another direction \
+             (across the road) to measure the focal length"
+                .to_string(),
+        );
+    }
+    let Some(variances) = log_variances(cal, inputs) else {
+        return LengthFocalFit::NotIdentified(
+            "a known length's pixels do not see the road".to_string(),
+        );
+    };
+    let weights: Vec<f64> = variances.iter().map(|v| 1.0 / v).collect();
+    let [lo, hi] = SEARCH_RANGE_WIDTHS.map(|r| (r * width).ln());
+    let solve = |vp1: Point2, horizon: Line, inputs: &[ScaleInput]| {
+        let cost = |f: f64| misfit(vp1, horizon, cal.pp, inputs, &weights, f);
+        best_log_focal(&cost, lo, hi)
+    };
+    let Some((x, chi2)) = solve(cal.vp1, cal.horizon, inputs) else {
+        return LengthFocalFit::NotIdentified(
+            "no focal length gives a camera for these lengths".to_string(),
+        );
+    };
+    let near_edge = (x - lo).min(hi - x) < 0.02 * (hi - lo);
+    let cost = |f: f64| misfit(cal.vp1, cal.horizon, cal.pp, inputs, &weights, f);
+    let rise = |factor: f64| {
+        let f = (x.exp() * factor).clamp(lo.exp(), hi.exp());
+        cost(f).map_or(f64::INFINITY, |c| c - chi2)
+    };
+    if near_edge {
+        return LengthFocalFit::NotIdentified(format!(
+            "no focal length between {:.0} and {:.0} px makes the known lengths agree: check \
+             their pixels and lengths",
+            lo.exp(),
+            hi.exp()
+        ));
+    }
+    if rise(2.0) < IDENTIFIED_DELTA_CHI2 || rise(0.5) < IDENTIFIED_DELTA_CHI2 {
+        return LengthFocalFit::NotIdentified(
+            "the known lengths lie in one direction (or nearly): they fix the scale, not the \
+             focal length; give one across the road too to measure it"
+                .to_string(),
+        );
+    }
+    // Propagation: refit with each input moved by one standard deviation, both ways. A move
+    // after which no focal length fits (a pixel above the moved horizon) counts one-sided,
+    // or, both ways, as the whole searched range: the lengths do not pin it down.
+    let mut var = 0.0;
+    let mut add = |plus: Option<(f64, f64)>, minus: Option<(f64, f64)>| {
+        var += match (plus, minus) {
+            (Some((a, _)), Some((b, _))) => (0.5 * (a - b)).powi(2),
+            (Some((a, _)), None) | (None, Some((a, _))) => (a - x).powi(2),
+            (None, None) => (0.5 * (hi - lo)).powi(2),
+        };
+    };
+    for i in 0..inputs.len() {
+        for coord in 0..4 {
+            let moved = |h: f64| {
+                let mut v = inputs.to_vec();
+                let p = if coord < 2 {
+                    &mut v[i].known.p1
+                } else {
+                    &mut v[i].known.p2
+                };
+                if coord % 2 == 0 {
+                    p.x += h;
+                } else {
+                    p.y += h;
+                }
+                v
+            };
+            add(
+                solve(cal.vp1, cal.horizon, &moved(CLICK_SD_PX)),
+                solve(cal.vp1, cal.horizon, &moved(-CLICK_SD_PX)),
+            );
+        }
+        let rel = match inputs[i].kind {
+            RoadMeasure::Distance => DISTANCE_REL_SD,
+            RoadMeasure::LaneWidth => LANE_WIDTH_REL_SD,
+        };
+        let scaled = |k: f64| {
+            let mut v = inputs.to_vec();
+            v[i].known.distance_m *= k;
+            v
+        };
+        add(
+            solve(cal.vp1, cal.horizon, &scaled((rel).exp())),
+            solve(cal.vp1, cal.horizon, &scaled((-rel).exp())),
+        );
+    }
+    // VP1 moved (the horizon keeps its angle), the horizon turned about VP1.
+    let shifted = |d: Point2| {
+        let vp1 = cal.vp1 + d;
+        let dir = Point2::new(cal.horizon.0[1], -cal.horizon.0[0]);
+        Line::through_with_direction(vp1, dir).map(|h| (vp1, h))
+    };
+    for d in [
+        Point2::new(spread.vp1_sd_px, 0.0),
+        Point2::new(0.0, spread.vp1_sd_px),
+    ] {
+        let plus = shifted(d).and_then(|(v, h)| solve(v, h, inputs));
+        let minus = shifted(Point2::new(-d.x, -d.y)).and_then(|(v, h)| solve(v, h, inputs));
+        add(plus, minus);
+    }
+    let turned = |deg: f64| {
+        let (s, c) = deg.to_radians().sin_cos();
+        let dir = Point2::new(cal.horizon.0[1], -cal.horizon.0[0]);
+        let dir = Point2::new(c * dir.x - s * dir.y, s * dir.x + c * dir.y);
+        Line::through_with_direction(cal.vp1, dir).and_then(|h| solve(cal.vp1, h, inputs))
+    };
+    add(
+        turned(spread.horizon_angle_sd_deg),
+        turned(-spread.horizon_angle_sd_deg),
+    );
+    let dof = inputs.len() - 2;
+    // More lengths than unknowns: a misfit beyond their noise widens the interval.
+    let excess = if dof > 0 {
+        (chi2 / dof as f64).max(1.0)
+    } else {
+        1.0
+    };
+    let log_sd = (var * excess).sqrt();
+    let focal_px = x.exp();
+    let Some(camera) = camera_with_focal(cal, focal_px) else {
+        return LengthFocalFit::NotIdentified(
+            "the fitted focal length gives no camera".to_string(),
+        );
+    };
+    LengthFocalFit::Measured(LengthFocal {
+        focal_px,
+        interval_px: [focal_px * (-log_sd).exp(), focal_px * log_sd.exp()],
+        log_sd,
+        camera,
+        chi2,
+        dof,
+    })
+}
+
+/// The calibration's focal length before the lengths: value, 68 % interval and source.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PriorFocal {
+    pub focal_px: f64,
+    pub interval_px: Option<[f64; 2]>,
+    pub source: String,
+}
+
+/// The focal length after the lengths: their measurement combined with the calibration's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CombinedFocal {
+    pub focal_px: f64,
+    pub interval_px: [f64; 2],
+    /// `distances`, or `distances+<source>` where both carried at least
+    /// [`MIN_SHARE`] of the weight.
+    pub source: String,
+    /// The lengths' share of the weight, 0-1.
+    pub lengths_share: f64,
+    /// Set when the two disagree beyond two standard deviations of both.
+    pub disagreement: Option<String>,
+}
+
+/// The least share of the weight for a source to be named as carrying the focal length.
+pub const MIN_SHARE: f64 = 0.2;
+
+/// Half the log width of a 68 % interval: its standard deviation in `ln f`.
+fn log_sd_of(interval: [f64; 2]) -> Option<f64> {
+    let [lo, hi] = interval;
+    (lo.is_finite() && lo > 0.0 && hi > lo).then(|| 0.5 * (hi / lo).ln())
+}
+
+/// One focal length from the lengths' `m` and the calibration's `prior`, each a log-normal
+/// likelihood: the inverse-variance mean in `ln f`. An assumed focal length (`prior`: the
+/// 15-90° band, uniform in `ln f`) adds nothing where the lengths are narrower than it, and
+/// is kept where they are wider (`None`); a given one (`--focal`) is kept too. Where a
+/// measured focal length and the lengths disagree by more than two standard deviations of
+/// both, they are still combined (the interval then holds neither well), and `disagreement`
+/// says so.
+pub fn combine(m: &LengthFocal, prior: &PriorFocal) -> Option<CombinedFocal> {
+    let (fm, sm) = (m.focal_px.ln(), m.log_sd.max(1e-9));
+    if prior.source == "given" {
+        return None;
+    }
+    let prior_sd = prior.interval_px.and_then(log_sd_of);
+    let alone = CombinedFocal {
+        focal_px: m.focal_px,
+        interval_px: m.interval_px,
+        source: "distances".to_string(),
+        lengths_share: 1.0,
+        disagreement: None,
+    };
+    let Some(sp) = prior_sd.filter(|_| prior.focal_px.is_finite() && prior.focal_px > 0.0) else {
+        return Some(alone);
+    };
+    if prior.source == "prior" {
+        return (sm < sp).then_some(alone);
+    }
+    let fp = prior.focal_px.ln();
+    let (wm, wp) = (1.0 / (sm * sm), 1.0 / (sp * sp));
+    let share = wm / (wm + wp);
+    let f = (share * fm + (1.0 - share) * fp).exp();
+    let sd = (1.0 / (wm + wp)).sqrt();
+    let disagreement = ((fm - fp).abs() > 2.0 * (sm * sm + sp * sp).sqrt()).then(|| {
+        format!(
+            "the known lengths give a focal length of {:.0} px (68% {:.0}-{:.0}), the footage \
+             {:.0} px ({}): one of them is wrong; check the lengths' pixels, or calibrate \
+             with --focal PX if the lens is known",
+            m.focal_px, m.interval_px[0], m.interval_px[1], prior.focal_px, prior.source
+        )
+    });
+    let source = if share >= 1.0 - MIN_SHARE {
+        "distances".to_string()
+    } else if share < MIN_SHARE {
+        prior.source.clone()
+    } else {
+        format!("distances+{}", prior.source)
+    };
+    Some(CombinedFocal {
+        focal_px: f,
+        interval_px: [f * (-sd).exp(), f * sd.exp()],
+        source,
+        lengths_share: share,
+        disagreement,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::road::KnownDistance;
+
+    /// A camera 1280x720 with focal `f`, VP1 up the middle, horizon tilted by `roll` rad.
+    fn camera(f: f64, roll: f64) -> Calibration {
+        let pp = Point2::new(640.0, 360.0);
+        let vp1 = Point2::new(700.0, -150.0);
+        let dir = Point2::new(roll.cos(), roll.sin());
+        let h = Line::through_with_direction(vp1, dir).unwrap();
+        with_focal(vp1, h, pp, f).unwrap()
+    }
+
+    /// The pixels of road points `a` and `b` (metres, scale `s`) and their distance.
+    fn known(cal: &Calibration, s: f64, a: [f64; 2], b: [f64; 2]) -> KnownDistance {
+        let p = |q: [f64; 2]| cal.pixel_of_road_point([q[0] / s, q[1] / s]).unwrap();
+        KnownDistance {
+            p1: p(a),
+            p2: p(b),
+            distance_m: (a[0] - b[0]).hypot(a[1] - b[1]),
+        }
+    }
+
+    fn distance(k: KnownDistance) -> ScaleInput {
+        ScaleInput {
+            kind: RoadMeasure::Distance,
+            known: k,
+        }
+    }
+
+    #[test]
+    fn an_along_and_an_across_length_give_the_true_focal_length() {
+        for f_true in [700.0, 1400.0, 2600.0] {
+            for roll in [0.0, 0.03] {
+                let truth = camera(f_true, roll);
+                let s = 0.05;
+                let base = truth.road_point(Point2::new(640.0, 650.0)).unwrap();
+                let o = [base[0] * s, base[1] * s];
+                let along = known(&truth, s, o, [o[0] + 12.0, o[1]]);
+                let across = known(&truth, s, o, [o[0], o[1] + 3.5]);
+                // Start from a wrong focal length: VP1 and the horizon are what carry over.
+                let start = camera_with_focal(&truth, f_true * 1.8).unwrap();
+                let spread = CameraSpread::floored(None, 1280.0);
+                let LengthFocalFit::Measured(fit) = fit_focal_from_lengths(
+                    &start,
+                    &[distance(along), distance(across)],
+                    spread,
+                    1280.0,
+                ) else {
+                    panic!("not identified at f {f_true}");
+                };
+                assert!(
+                    (fit.focal_px / f_true - 1.0).abs() < 1e-4,
+                    "{} vs {f_true}",
+                    fit.focal_px
+                );
+                assert!(fit.interval_px[0] < f_true && f_true < fit.interval_px[1]);
+                assert!(fit.log_sd > 0.0 && fit.log_sd < 0.5, "{}", fit.log_sd);
+            }
+        }
+    }
+
+    #[test]
+    fn a_lane_width_and_a_length_along_fix_the_focal_length() {
+        let truth = camera(1100.0, 0.01);
+        let s = 0.04;
+        let base = truth.road_point(Point2::new(600.0, 600.0)).unwrap();
+        let o = [base[0] * s, base[1] * s];
+        let along = known(&truth, s, o, [o[0] + 15.0, o[1]]);
+        // Two pixels on two lane lines 3.5 m apart, 6 m apart along the road.
+        let lane = known(&truth, s, o, [o[0] + 6.0, o[1] + 3.5]);
+        let lane = ScaleInput {
+            kind: RoadMeasure::LaneWidth,
+            known: KnownDistance {
+                distance_m: 3.5,
+                ..lane
+            },
+        };
+        let start = camera_with_focal(&truth, 2000.0).unwrap();
+        let LengthFocalFit::Measured(fit) = fit_focal_from_lengths(
+            &start,
+            &[distance(along), lane],
+            CameraSpread::floored(None, 1280.0),
+            1280.0,
+        ) else {
+            panic!("not identified");
+        };
+        assert!(
+            (fit.focal_px / 1100.0 - 1.0).abs() < 1e-4,
+            "{}",
+            fit.focal_px
+        );
+    }
+
+    #[test]
+    fn lengths_in_one_direction_do_not_fix_the_focal_length() {
+        let truth = camera(1500.0, 0.0);
+        let s = 0.05;
+        let a = truth.road_point(Point2::new(500.0, 650.0)).unwrap();
+        let b = truth.road_point(Point2::new(800.0, 500.0)).unwrap();
+        let (a, b) = ([a[0] * s, a[1] * s], [b[0] * s, b[1] * s]);
+        let k1 = known(&truth, s, a, [a[0] + 10.0, a[1]]);
+        let k2 = known(&truth, s, b, [b[0] + 25.0, b[1]]);
+        let fit = fit_focal_from_lengths(
+            &truth,
+            &[distance(k1), distance(k2)],
+            CameraSpread::floored(None, 1280.0),
+            1280.0,
+        );
+        assert!(
+            matches!(&fit, LengthFocalFit::NotIdentified(why) if why.contains("one direction")),
+            "{fit:?}"
+        );
+        let one = fit_focal_from_lengths(
+            &truth,
+            &[distance(k1)],
+            CameraSpread::floored(None, 1280.0),
+            1280.0,
+        );
+        assert!(matches!(one, LengthFocalFit::NotIdentified(_)));
+    }
+
+    #[test]
+    fn a_third_length_that_disagrees_widens_the_interval() {
+        let truth = camera(1200.0, 0.0);
+        let s = 0.05;
+        let base = truth.road_point(Point2::new(640.0, 620.0)).unwrap();
+        let o = [base[0] * s, base[1] * s];
+        let along = distance(known(&truth, s, o, [o[0] + 12.0, o[1]]));
+        let across = distance(known(&truth, s, o, [o[0], o[1] + 3.5]));
+        let diag = known(&truth, s, o, [o[0] + 8.0, o[1] + 3.0]);
+        let spread = CameraSpread::floored(None, 1280.0);
+        let LengthFocalFit::Measured(good) =
+            fit_focal_from_lengths(&truth, &[along, across, distance(diag)], spread, 1280.0)
+        else {
+            panic!()
+        };
+        let bad = distance(KnownDistance {
+            distance_m: diag.distance_m * 1.2,
+            ..diag
+        });
+        let LengthFocalFit::Measured(worse) =
+            fit_focal_from_lengths(&truth, &[along, across, bad], spread, 1280.0)
+        else {
+            panic!()
+        };
+        assert!((good.focal_px / 1200.0 - 1.0).abs() < 1e-3);
+        assert!(
+            worse.chi2 > 10.0 * good.chi2.max(1e-9),
+            "{} {}",
+            worse.chi2,
+            good.chi2
+        );
+        assert!(worse.log_sd > good.log_sd);
+    }
+
+    fn measured(f: f64, sd: f64) -> LengthFocal {
+        LengthFocal {
+            focal_px: f,
+            interval_px: [f * (-sd).exp(), f * sd.exp()],
+            log_sd: sd,
+            camera: camera(f, 0.0),
+            chi2: 0.0,
+            dof: 0,
+        }
+    }
+
+    fn prior(f: f64, sd: f64, source: &str) -> PriorFocal {
+        PriorFocal {
+            focal_px: f,
+            interval_px: Some([f * (-sd).exp(), f * sd.exp()]),
+            source: source.to_string(),
+        }
+    }
+
+    #[test]
+    fn the_combination_weighs_each_focal_length_by_its_precision() {
+        // Equal precision: the geometric mean, the interval narrower by sqrt(2).
+        let c = combine(&measured(1000.0, 0.1), &prior(1210.0, 0.1, "edgelets")).unwrap();
+        assert!((c.focal_px - 1100.0).abs() < 1.0, "{}", c.focal_px);
+        assert_eq!(c.source, "distances+edgelets");
+        let sd = log_sd_of(c.interval_px).unwrap();
+        assert!((sd - 0.1 / 2f64.sqrt()).abs() < 1e-9);
+        assert!(c.disagreement.is_none());
+        // Far more precise lengths carry it alone; far vaguer ones leave the footage's.
+        let c = combine(&measured(1000.0, 0.02), &prior(1300.0, 0.05, "edgelets")).unwrap();
+        assert_eq!(c.source, "distances");
+        assert!(c.disagreement.is_some(), "4.9 sd apart");
+        let c = combine(&measured(1000.0, 0.02), &prior(1300.0, 0.2, "edgelets")).unwrap();
+        assert!(c.disagreement.is_none(), "1.3 sd apart");
+        let c = combine(&measured(300.0, 3.0), &prior(850.0, 0.2, "edgelets")).unwrap();
+        assert_eq!(c.source, "edgelets");
+        assert!((c.focal_px / 850.0 - 1.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn an_assumed_focal_length_gives_way_to_narrower_lengths_and_a_given_one_never() {
+        let c = combine(&measured(3000.0, 0.05), &prior(2646.0, 0.7, "prior")).unwrap();
+        assert_eq!((c.focal_px, c.source.as_str()), (3000.0, "distances"));
+        assert!(combine(&measured(3000.0, 1.5), &prior(2646.0, 0.7, "prior")).is_none());
+        assert!(combine(&measured(3000.0, 0.01), &prior(2646.0, 0.0, "given")).is_none());
+    }
+}
