@@ -129,6 +129,9 @@ pub struct InputSummary {
     pub dropped: Dropped,
     /// Vehicle boxes that reached the network (for a VPout file: its records).
     pub vehicle_boxes: u64,
+    /// Boxes of vehicles followed from frame to frame that the network did not see again
+    /// (they count for the tracks; `calibrate --all-crops` sends every box).
+    pub followed_boxes: u64,
     pub seconds: f64,
 }
 

@@ -12,6 +12,9 @@
 //! vpcal adds `"edgelets": [[x, y, angle, strength], ...]` (frame pixels, radians) to the items
 //! it writes when it found edgelets in the box (`vpcal calibrate --vehicles`), so that
 //! `vpcal aggregate` on that file sees what `calibrate` saw; other readers ignore the field.
+//! It writes `"vps_copied": true` on the boxes the network did not see, whose `vp1`/`vp2` it
+//! copied from an earlier box of the same vehicle (they count for tracks and edgelets, not as
+//! rays); absent means false.
 //!
 //! `detections.json`: `[{"frame_cnt", "boxes": [[ymin, xmin, ymax, xmax] normalised], "scores"}]`.
 
@@ -56,6 +59,8 @@ pub struct VpOutItem {
     pub vp2_var: Option<f64>,
     /// vpcal's edgelets in the box, `[x, y, angle, strength]` (empty when absent).
     pub edgelets: Vec<[f64; 4]>,
+    /// vpcal's `vps_copied`: the VPs are an earlier box's of the same vehicle (module docs).
+    pub vps_copied: bool,
 }
 
 impl VpOutItem {
@@ -105,6 +110,7 @@ impl VpOutItem {
             frame: Some(self.frame_cnt),
             vp1_spread: self.vp1_spread(),
             vp2_spread: self.vp2_spread(),
+            copied: self.vps_copied,
         }
     }
 
@@ -162,6 +168,10 @@ impl VpOutItem {
                 .map(|v| v.as_f64(&path("vp2_var")))
                 .transpose()?,
             edgelets,
+            vps_copied: opt("vps_copied")
+                .map(|v| v.as_bool(&path("vps_copied")))
+                .transpose()?
+                .unwrap_or(false),
         })
     }
 
@@ -209,6 +219,9 @@ impl VpOutItem {
         }
         put("vp1", self.vp1.into());
         put("vp2", self.vp2.into());
+        if self.vps_copied {
+            put("vps_copied", Json::Bool(true));
+        }
         if !self.edgelets.is_empty() {
             put(
                 "edgelets",
@@ -507,6 +520,7 @@ mod tests {
             vp1_var: None,
             vp2_var: None,
             edgelets: Vec::new(),
+            vps_copied: false,
         }
     }
 

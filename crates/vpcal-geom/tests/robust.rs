@@ -855,6 +855,7 @@ fn vehicle_units_group_the_boxes_of_one_moving_vehicle() {
         frame,
         vp1_spread: None,
         vp2_spread: None,
+        copied: false,
     };
     let mut pairs = Vec::new();
     for f in 0..20 {

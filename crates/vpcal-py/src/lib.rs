@@ -127,6 +127,9 @@ fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
     if let Some(v) = opt(d, "max_per_frame", "an int")? {
         c.max_per_frame = v;
     }
+    if let Some(v) = opt(d, "all_crops", "a bool")? {
+        c.all_crops = v;
+    }
     if let Some(v) = parsed(d, "method")? {
         c.method = v;
     }
@@ -169,6 +172,9 @@ fn detector_settings(d: &Bound<'_, PyDict>) -> PyResult<DetectorSettings> {
         s.choice = v;
     }
     s.tiles = opt(d, "tiles", "an int")?;
+    if let Some(v) = opt(d, "every_tile", "a bool")? {
+        s.every_tile = v;
+    }
     if let Some(v) = parsed(d, "onnx_layout")? {
         s.onnx_layout = v;
     }

@@ -148,7 +148,8 @@ def test_tracks_and_speeds_with_a_scale(scene, truth):
         assert all(t.speed_kmh is None for t in cal.tracks)
     else:  # the automatic scale, from the vehicles' sizes
         assert cal.to_dict()["scale_source"] == "vehicles" and cal.tracks_note is None
-    assert len(cal.vehicles) == cal.to_dict()["input"]["vehicle_boxes"]
+    inp = cal.to_dict()["input"]
+    assert len(cal.vehicles) == inp["vehicle_boxes"] + inp["followed_boxes"]
     # The scale from the scene's first taped distance.
     gt = json.loads((scene / "gt_data.json").read_text())
     m = gt["distanceMeasurement"][0]

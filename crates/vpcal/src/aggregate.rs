@@ -198,10 +198,14 @@ pub const WEAK_VP1_RAY_SCATTER_DEG: f64 = 5.0;
 /// fit and the two differ by more than two model errors ([`MEASURED_FOCAL_MODEL_LOG_SD`]):
 /// the tracks that made the road count as curved may bend for another reason (box centres
 /// drifting on the approaching vehicles, a slight bend far away), and nothing says which fit
-/// is right.
+/// is right. Only where the curved fit's focal length was used (`curved_focal`): where it
+/// gave the horizon only, the focal length is another source's (or assumed).
 fn straight_fit_disagreeing(e: &robust::Evidence, focal_px: f64) -> Option<f64> {
     let fs = e.edgelet_focal_px.filter(|f| f.is_finite() && *f > 0.0)?;
-    (e.curved_fit && (focal_px / fs).ln().abs() > 2.0 * MEASURED_FOCAL_MODEL_LOG_SD).then_some(fs)
+    (e.curved_fit
+        && e.curved_focal
+        && (focal_px / fs).ln().abs() > 2.0 * MEASURED_FOCAL_MODEL_LOG_SD)
+        .then_some(fs)
 }
 
 use vpcal_formats::calib::FOCAL_WARNINGS;
@@ -754,6 +758,7 @@ mod tests {
     fn a_curved_fit_that_the_straight_fit_contradicts_is_flagged() {
         let curved = |straight: f64| robust::Evidence {
             curved_fit: true,
+            curved_focal: true,
             vp1_from_tracks: true,
             edgelet_focal_px: Some(straight),
             ..robust::Evidence::default()
@@ -772,6 +777,15 @@ mod tests {
         assert!(with_evidence(FocalSource::Edgelets, straight)
             .warnings()
             .is_empty());
+        // The curved fit gave the horizon only: the focal length is not its to contradict.
+        let horizon_only = robust::Evidence {
+            curved_focal: false,
+            ..curved(300.0)
+        };
+        assert!(with_evidence(FocalSource::Prior, horizon_only)
+            .warnings()
+            .iter()
+            .all(|w| !w.contains("curved-road fit")));
     }
 
     #[test]

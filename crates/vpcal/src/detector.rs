@@ -13,6 +13,8 @@ pub struct DetectorSettings {
     /// Columns of square tiles a learned detector looks at besides the whole frame; `None`:
     /// [`default_tiles`] of the frame width.
     pub tiles: Option<u32>,
+    /// Look at every tile in every frame instead of one tile per frame in turn.
+    pub every_tile: bool,
     /// Output layout of an [`DetectorChoice::Onnx`] model.
     pub onnx_layout: OnnxLayout,
     /// Count COCO motorcycles as vehicles too.
@@ -26,6 +28,7 @@ impl Default for DetectorSettings {
         DetectorSettings {
             choice: DetectorChoice::Auto,
             tiles: None,
+            every_tile: false,
             onnx_layout: OnnxLayout::Yolo,
             motorcycles: false,
             road_mask: None,
@@ -131,6 +134,8 @@ pub fn open_detector(a: &DetectorSettings, info: &SourceInfo) -> Result<Box<dyn 
     let yolox_config = || YoloxConfig {
         classes: classes.clone(),
         tiles: a.tiles.unwrap_or_else(|| default_tiles(info.width)),
+        // Stills are unrelated pictures: each must be looked at whole, every tile.
+        tile_rotation: !a.every_tile && !is_stills(info),
         ..YoloxConfig::default()
     };
     match choice {

@@ -338,6 +338,11 @@ pub fn label_footage(
     progress: &dyn Progress,
 ) -> Result<(CameraReport, Vec<SampleRecord>)> {
     let mut report = CameraReport::new(camera, input);
+    // Training crops want every box the network can see, not a few per vehicle.
+    let config = &PipelineConfig {
+        all_crops: true,
+        ..config.clone()
+    };
     let out = run_pipeline(input, config, progress)?;
     report.frames = out.stats.frames;
     report.boxes = out.records.len();

@@ -6,6 +6,7 @@
 //! - [`pipeline`]: [`PipelineConfig`], [`run_pipeline`] (footage to per-vehicle VP records)
 //!   and [`calibrate`] (records to a camera).
 //! - [`detector`]: which vehicle detector, and its settings.
+//! - [`crop_plan`]: which boxes of a followed vehicle go through the VP network.
 //! - [`aggregate`]: per-vehicle VP pairs to one camera, with a summary and evidence.
 //! - [`output`]: the calibration file, the BrnoCompSpeed system file and vehicle records.
 //! - [`overlay`]: the picture of a calibration (horizon, road grid, vehicle VP directions).
@@ -23,6 +24,7 @@
 
 pub mod aggregate;
 pub mod autoscale;
+pub mod crop_plan;
 pub mod detector;
 pub mod kitti;
 pub mod label;

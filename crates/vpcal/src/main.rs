@@ -60,6 +60,9 @@ enum Command {
     /// Throughput of the VP network, optionally against PyTorch (developer tool).
     #[command(hide = true)]
     BenchNet(cmd::bench_net::Args),
+    /// Frames/s of `calibrate` on a clip, and the time of each stage (developer tool).
+    #[command(hide = true)]
+    BenchPipeline(cmd::bench_pipeline::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -80,6 +83,7 @@ fn main() -> std::process::ExitCode {
         Command::Train(args) => cmd::train::run(args),
         Command::Predict(args) => cmd::predict::run(args),
         Command::BenchNet(args) => cmd::bench_net::run(args),
+        Command::BenchPipeline(args) => cmd::bench_pipeline::run(args),
     };
     exit_code(result.map(|()| cmd::Exit::Success))
 }

@@ -48,6 +48,7 @@ pub fn input_summary(out: &PipelineOutput) -> InputSummary {
             seen_before: s.dropped_seen,
         },
         vehicle_boxes: s.crops,
+        followed_boxes: s.crops_skipped,
         seconds: s.seconds,
     }
 }

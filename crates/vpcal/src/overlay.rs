@@ -105,7 +105,7 @@ pub fn picture_frame(out: &PipelineOutput, frames: &SourceOptions) -> Option<u64
 fn sample(records: &[VehicleRecord], n: usize) -> Vec<&VehicleRecord> {
     let ok: Vec<&VehicleRecord> = records
         .iter()
-        .filter(|r| r.vp1.is_finite() && r.vp2.is_finite())
+        .filter(|r| r.prediction.is_some() && r.vp1.is_finite() && r.vp2.is_finite())
         .collect();
     if ok.len() <= n {
         return ok;
@@ -139,7 +139,8 @@ fn draw_record(img: &mut RgbImage, r: &VehicleRecord) {
     let w = line_width(img);
     let b = &r.crop_box;
     draw_rect(img, b, WHITE, w * 0.75);
-    if r.vp1.is_finite() && r.vp2.is_finite() {
+    // Only the network's own VPs (a box it did not see carries its vehicle's, copied).
+    if r.prediction.is_some() && r.vp1.is_finite() && r.vp2.is_finite() {
         let c = b.center();
         let len = 1.5 * b.width().max(b.height());
         draw_line(img, [c.x, c.y], towards(c, r.vp1, len), RED, w);
@@ -596,7 +597,7 @@ pub fn draw_scene(picture: &RgbImage, cal: Option<&Calibration>, scene: &Scene<'
                 draw_record(&mut img, r);
                 n_boxes += 1;
             }
-            if !records.is_empty() {
+            if records.iter().any(|r| r.prediction.is_some()) {
                 legend.push((
                     vec![Swatch::Line(RED), Swatch::Line(GREEN)],
                     "to VP1 / VP2 (network)".to_string(),

@@ -23,12 +23,13 @@ use vpcal_geom::heatmap::VpPrediction;
 use vpcal_geom::{BoxPx, Point2};
 use vpcal_net::VpNet;
 use vpcal_video::background::{scene_edgelet_options, scene_edgelets, BackgroundSampler};
-use vpcal_video::crop::{CropFilter, CropResizer};
+use vpcal_video::crop::{integer_box, CropFilter, CropResizer};
 use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
 use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
 use vpcal_video::{Detector, Frame, FrameSource, SourceInfo, SourceKind, SourceOptions};
 
 use crate::aggregate::{aggregate, Aggregated, Method};
+use crate::crop_plan::{CropPlanSettings, CropPlanner};
 pub use crate::detector::is_stills;
 use crate::detector::{open_detector, DetectorSettings};
 use crate::model::load_model;
@@ -126,6 +127,9 @@ pub struct PipelineConfig {
     pub keep_static: bool,
     /// At most this many boxes per frame, best first (0: no limit).
     pub max_per_frame: usize,
+    /// Every box of every frame through the network, instead of a few per followed vehicle
+    /// ([`crate::crop_plan`]; stills always send every box).
+    pub all_crops: bool,
     pub method: Method,
     /// Bootstrap resamples of the robust method (0: none).
     pub bootstrap: usize,
@@ -152,6 +156,7 @@ impl Default for PipelineConfig {
             min_score: 0.1,
             keep_static: false,
             max_per_frame: 10,
+            all_crops: false,
             method: Method::Robust,
             bootstrap: 30,
             pp: PrincipalPoint::Centre,
@@ -229,12 +234,14 @@ pub struct VehicleRecord {
     /// The detector's box as it gave it (sub-pixel, not rounded to the crop's integer box),
     /// frame pixels: what tracks and speeds use.
     pub det_box: BoxPx,
-    /// The decoded network output, box frame.
-    pub prediction: VpPrediction,
-    /// VP1 and VP2 in frame pixels.
+    /// The decoded network output, box frame; `None` for a box of a followed vehicle the
+    /// network did not see ([`crate::crop_plan`]).
+    pub prediction: Option<VpPrediction>,
+    /// VP1 and VP2 in frame pixels: the network's for this box, or without a prediction
+    /// copied from the latest box of the same vehicle it saw (NaN when it saw none).
     pub vp1: Point2,
     pub vp2: Point2,
-    /// Edgelets inside the box near the network's VP rays (empty with `--no-edgelets`).
+    /// Edgelets inside the box near the VP rays (empty with `--no-edgelets`).
     pub edgelets: Vec<Edgelet>,
 }
 
@@ -246,8 +253,9 @@ impl VehicleRecord {
             score: f64::from(self.score),
             box_px: Some(self.crop_box),
             frame: Some(self.frame as f64),
-            vp1_spread: Some(self.prediction.vp1_spread()),
-            vp2_spread: Some(self.prediction.vp2_spread()),
+            vp1_spread: self.prediction.as_ref().map(VpPrediction::vp1_spread),
+            vp2_spread: self.prediction.as_ref().map(VpPrediction::vp2_spread),
+            copied: self.prediction.is_none(),
         }
     }
 
@@ -255,7 +263,7 @@ impl VehicleRecord {
     pub fn to_vpout(&self, width: u32, height: u32) -> VpOutItem {
         let b = &self.crop_box;
         let (w, h) = (f64::from(width), f64::from(height));
-        let p = &self.prediction;
+        let p = self.prediction.as_ref();
         VpOutItem {
             frame_cnt: self.frame as f64,
             score: f64::from(self.score),
@@ -265,16 +273,18 @@ impl VehicleRecord {
             box_center: Some(b.center()),
             box_scale: Some(b.half_size()),
             vp_box: Some([b.y0, b.x0, b.y1, b.x1]),
-            vp1_box: Some(p.vp1),
-            vp2_box: Some(p.vp2),
-            pred_vps: p
-                .per_scale
-                .iter()
-                .map(|[a, b]| [a.x, a.y, b.x, b.y])
-                .collect(),
-            pred_vars: p.spreads.clone(),
-            vp1_var: Some(p.vp1_spread()),
-            vp2_var: Some(p.vp2_spread()),
+            vp1_box: p.map(|p| p.vp1),
+            vp2_box: p.map(|p| p.vp2),
+            pred_vps: p.map_or_else(Vec::new, |p| {
+                p.per_scale
+                    .iter()
+                    .map(|[a, b]| [a.x, a.y, b.x, b.y])
+                    .collect()
+            }),
+            pred_vars: p.map_or_else(Vec::new, |p| p.spreads.clone()),
+            vp1_var: p.map(VpPrediction::vp1_spread),
+            vp2_var: p.map(VpPrediction::vp2_spread),
+            vps_copied: p.is_none() && self.vp1.is_finite(),
             edgelets: self.edgelets.iter().map(edgelet_row).collect(),
         }
     }
@@ -294,7 +304,45 @@ pub struct PipelineStats {
     /// Boxes of a still-image folder at the place of a box kept in an earlier picture.
     pub dropped_seen: u64,
     pub crops: u64,
+    /// Boxes of followed vehicles the network did not see again (records without VPs).
+    pub crops_skipped: u64,
     pub seconds: f64,
+    /// Where the time went, per stage.
+    pub stages: StageSeconds,
+}
+
+/// Seconds spent in each stage of the pipeline (wall time, summed over frames).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct StageSeconds {
+    /// Reading and decoding frames (both passes).
+    pub decode: f64,
+    /// The detector.
+    pub detect: f64,
+    /// The per-frame filter of its boxes (score, static vehicles, per-frame limit).
+    pub filter: f64,
+    /// Cutting and resizing the crops for the network.
+    pub crop: f64,
+    /// The edgelets inside the vehicle boxes.
+    pub edgelets: f64,
+    /// The VP network on the batched crops, and decoding its heatmaps.
+    pub network: f64,
+    /// Sampling frames for the background, its median and the scene's edgelets.
+    pub background: f64,
+}
+
+impl StageSeconds {
+    /// The stages by name, in pipeline order.
+    pub fn named(&self) -> [(&'static str, f64); 7] {
+        [
+            ("decode", self.decode),
+            ("detect", self.detect),
+            ("filter", self.filter),
+            ("crop", self.crop),
+            ("edgelets", self.edgelets),
+            ("network", self.network),
+            ("background", self.background),
+        ]
+    }
 }
 
 /// Everything the pipeline produced before aggregation.
@@ -371,8 +419,21 @@ impl EdgeletBudget {
     }
 }
 
-/// A crop waiting for its batch: frame, score, crop box, detector box, edgelets in the box.
-type Pending = (u64, f32, BoxPx, BoxPx, Vec<Edgelet>);
+/// A crop waiting for its batch: frame, score, crop box, detector box, edgelets in the box,
+/// and the followed vehicle it belongs to.
+type Pending = (u64, f32, BoxPx, BoxPx, Vec<Edgelet>, Option<u64>);
+
+/// A box the network does not see, waiting for its vehicle's first network VPs (its
+/// edgelets not yet gated by them).
+#[derive(Debug)]
+struct Waiting {
+    frame: u64,
+    score: f32,
+    crop_box: BoxPx,
+    det_box: BoxPx,
+    vehicle: u64,
+    edgelets: Vec<Edgelet>,
+}
 
 /// Everything after the detector: filter, crops, edgelets, batched network, records.
 struct Stages<'a> {
@@ -385,6 +446,10 @@ struct Stages<'a> {
     pending_meta: Vec<Pending>,
     records: Vec<VehicleRecord>,
     boxes: Vec<TrackBox>,
+    /// Boxes not sent to the network, until their vehicle has network VPs.
+    waiting: Vec<Waiting>,
+    /// The latest network VPs of each followed vehicle.
+    vehicle_vps: std::collections::HashMap<u64, (Point2, Point2)>,
     budget: EdgeletBudget,
     edgelet_options: EdgeletOptions,
     gate: EdgeletFitOptions,
@@ -404,11 +469,20 @@ impl<'a> Stages<'a> {
             pending_meta: Vec::with_capacity(config.batch),
             records: Vec::new(),
             boxes: Vec::new(),
+            waiting: Vec::new(),
+            vehicle_vps: std::collections::HashMap::new(),
             budget: EdgeletBudget::new(EDGELET_RECORDS),
             edgelet_options: EdgeletOptions::default(),
             gate: EdgeletFitOptions::default(),
             stats: PipelineStats::default(),
         })
+    }
+
+    /// The crop planner of one pass over consecutive frames; `None` (every box to the
+    /// network) for stills or with `all_crops`.
+    fn planner(&self, info: &SourceInfo) -> Option<CropPlanner> {
+        (!self.config.all_crops && !is_stills(info))
+            .then(|| CropPlanner::new(CropPlanSettings::for_step(self.config.frames.every.max(1))))
     }
 
     /// The per-frame filter (each pass over the frames gets its own: it compares a frame's
@@ -431,12 +505,17 @@ impl<'a> Stages<'a> {
         frame: &Frame,
         detector: &mut dyn Detector,
         filter: &mut FrameFilter,
+        planner: Option<&mut CropPlanner>,
     ) -> Result<()> {
+        let t = Instant::now();
         let dets = detector
             .detect(frame)
             .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
         self.stats.detections += dets.len() as u64;
+        self.stats.stages.detect += t.elapsed().as_secs_f64();
+        let t = Instant::now();
         let filtered = filter.apply(frame, dets);
+        self.stats.stages.filter += t.elapsed().as_secs_f64();
         let over_limit = filtered
             .dropped
             .iter()
@@ -461,20 +540,72 @@ impl<'a> Stages<'a> {
             return Ok(());
         }
         let boxes: Vec<BoxPx> = filtered.kept.iter().map(|d| d.bbox).collect();
-        let batch = self.resizer.crop_batch(&frame.image, &boxes)?;
+        let plan: Vec<(bool, Option<u64>)> = match planner {
+            Some(p) => p
+                .plan(frame.index, &boxes)
+                .into_iter()
+                .map(|(send, id)| (send, Some(id)))
+                .collect(),
+            None => vec![(true, None); boxes.len()],
+        };
+        // The boxes the network does not see this time still make records (the tracks and
+        // the aggregation's vehicle links use every box), with their edgelets, which their
+        // vehicle's network VPs gate once it has them.
+        let (w, h) = frame.image.dimensions();
+        for (d, (_, vehicle)) in filtered.kept.iter().zip(&plan).filter(|(_, p)| !p.0) {
+            let (Some(ib), Some(vehicle)) = (integer_box(&d.bbox, w, h), *vehicle) else {
+                continue;
+            };
+            let crop_box = ib.to_box_px();
+            let index = self.records.len() + self.pending_meta.len() + self.waiting.len();
+            let t = Instant::now();
+            let edgelets = if self.config.edgelets && self.budget.keeps(index) {
+                edgelets_in_box(&frame.image, &crop_box, &self.edgelet_options)
+            } else {
+                Vec::new()
+            };
+            self.stats.stages.edgelets += t.elapsed().as_secs_f64();
+            self.waiting.push(Waiting {
+                frame: frame.index,
+                score: d.score,
+                crop_box,
+                det_box: d.bbox,
+                vehicle,
+                edgelets,
+            });
+            self.stats.crops_skipped += 1;
+        }
+        self.resolve_waiting(false);
+        let sent: Vec<usize> = (0..boxes.len()).filter(|&i| plan[i].0).collect();
+        if sent.is_empty() {
+            return Ok(());
+        }
+        let sent_boxes: Vec<BoxPx> = sent.iter().map(|&i| boxes[i]).collect();
+        let t = Instant::now();
+        let batch = self.resizer.crop_batch(&frame.image, &sent_boxes)?;
+        self.stats.stages.crop += t.elapsed().as_secs_f64();
         let len = self.crop_len;
         for (k, (&src, &bp)) in batch.source.iter().zip(&batch.boxes).enumerate() {
+            let src = sent[src];
             self.pending
                 .extend_from_slice(&batch.images[k * len..(k + 1) * len]);
-            let index = self.records.len() + self.pending_meta.len();
+            let index = self.records.len() + self.pending_meta.len() + self.waiting.len();
+            let t = Instant::now();
             let edgelets = if !self.config.edgelets || !self.budget.keeps(index) {
                 Vec::new()
             } else {
                 edgelets_in_box(&frame.image, &bp, &self.edgelet_options)
             };
+            self.stats.stages.edgelets += t.elapsed().as_secs_f64();
             let kept = &filtered.kept[src];
-            self.pending_meta
-                .push((frame.index, kept.score, bp, kept.bbox, edgelets));
+            self.pending_meta.push((
+                frame.index,
+                kept.score,
+                bp,
+                kept.bbox,
+                edgelets,
+                plan[src].1,
+            ));
             self.stats.crops += 1;
             if self.pending_meta.len() >= self.config.batch {
                 self.flush()?;
@@ -488,8 +619,9 @@ impl<'a> Stages<'a> {
         if self.pending_meta.is_empty() {
             return Ok(());
         }
+        let t = Instant::now();
         let preds = self.net.predict_prepared(&self.pending)?;
-        for ((frame, score, crop_box, det_box, edgelets), p) in
+        for ((frame, score, crop_box, det_box, edgelets, vehicle), p) in
             self.pending_meta.drain(..).zip(preds)
         {
             let prediction = p.vp;
@@ -511,13 +643,57 @@ impl<'a> Stages<'a> {
                 det_box,
                 vp1,
                 vp2,
-                prediction,
+                prediction: Some(prediction),
+                edgelets,
+            });
+            self.budget.pushed(&mut self.records, |r| &mut r.edgelets);
+            if let Some(id) = vehicle {
+                self.vehicle_vps.insert(id, (vp1, vp2));
+            }
+        }
+        self.pending.clear();
+        self.stats.stages.network += t.elapsed().as_secs_f64();
+        self.resolve_waiting(false);
+        Ok(())
+    }
+
+    /// Records for the waiting boxes whose vehicle has network VPs now (copied to them;
+    /// their edgelets gated by them); with `last`, also for the rest, without VPs.
+    fn resolve_waiting(&mut self, last: bool) {
+        let waiting = std::mem::take(&mut self.waiting);
+        for w in waiting {
+            let vps = self.vehicle_vps.get(&w.vehicle).copied();
+            if vps.is_none() && !last {
+                self.waiting.push(w);
+                continue;
+            }
+            let t = Instant::now();
+            let nan = Point2::new(f64::NAN, f64::NAN);
+            let (vp1, vp2) = vps.unwrap_or((nan, nan));
+            let edgelets = match vps {
+                Some(_) => near_rays(
+                    w.crop_box.center(),
+                    vp1,
+                    vp2,
+                    &w.edgelets,
+                    self.gate.gate_vp2_deg,
+                    self.gate.max_per_vehicle,
+                ),
+                None => Vec::new(),
+            };
+            self.stats.stages.edgelets += t.elapsed().as_secs_f64();
+            self.records.push(VehicleRecord {
+                frame: w.frame,
+                score: w.score,
+                crop_box: w.crop_box,
+                det_box: w.det_box,
+                prediction: None,
+                vp1,
+                vp2,
                 edgelets,
             });
             self.budget.pushed(&mut self.records, |r| &mut r.edgelets);
         }
-        self.pending.clear();
-        Ok(())
     }
 }
 
@@ -559,6 +735,7 @@ pub fn run_pipeline_on(
     let detector_name = detector.name();
     let mut stages = Stages::new(&net, config)?;
     let mut filter = stages.filter(&info);
+    let mut planner = stages.planner(&info);
 
     progress.start(info.expected_frames(&config.frames));
     let t0 = Instant::now();
@@ -575,7 +752,10 @@ pub fn run_pipeline_on(
             vehicle_boxes: s.crops,
         });
     };
-    for frame in source.by_ref() {
+    loop {
+        let t = Instant::now();
+        let Some(frame) = source.next() else { break };
+        stages.stats.stages.decode += t.elapsed().as_secs_f64();
         let frame = match frame {
             Ok(f) => f,
             // A damaged or truncated input keeps the frames it gave.
@@ -591,9 +771,11 @@ pub fn run_pipeline_on(
         };
         stages.stats.frames += 1;
         if config.edgelets {
+            let t = Instant::now();
             background.push(&frame.image);
+            stages.stats.stages.background += t.elapsed().as_secs_f64();
         }
-        stages.frame(&frame, detector.as_mut(), &mut filter)?;
+        stages.frame(&frame, detector.as_mut(), &mut filter, planner.as_mut())?;
         if detector
             .learned_until()
             .is_none_or(|until| frame.index < until)
@@ -617,17 +799,23 @@ pub fn run_pipeline_on(
         progress.add_frames(learning_frames);
         let mut source = open().with_context(|| format!("opening {} again", input.display()))?;
         let mut filter = stages.filter(&info);
-        for frame in source.by_ref() {
-            let Ok(frame) = frame else { break };
+        let mut planner = stages.planner(&info);
+        loop {
+            let t = Instant::now();
+            let Some(Ok(frame)) = source.next() else {
+                break;
+            };
+            stages.stats.stages.decode += t.elapsed().as_secs_f64();
             if frame.index >= until {
                 break;
             }
             stages.stats.replayed_frames += 1;
-            stages.frame(&frame, replay.as_mut(), &mut filter)?;
+            stages.frame(&frame, replay.as_mut(), &mut filter, planner.as_mut())?;
             report(&stages);
         }
     }
     stages.flush()?;
+    stages.resolve_waiting(true);
     progress.finish();
     let Stages {
         mut records,
@@ -644,9 +832,11 @@ pub fn run_pipeline_on(
     // The replayed frames come first in the stream.
     records.sort_by_key(|r| r.frame);
     boxes.sort_by_key(|b| b.frame);
+    let t = Instant::now();
     let scene_edgelets = background
         .median()
         .map_or_else(Vec::new, |bg| scene_edgelets(&bg, &scene_edgelet_options()));
+    stats.stages.background += t.elapsed().as_secs_f64();
     stats.seconds = t0.elapsed().as_secs_f64();
     Ok(PipelineOutput {
         info,

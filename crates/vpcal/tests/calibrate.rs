@@ -56,11 +56,17 @@ fn calibrate_a_real_clip_writes_consistent_outputs() {
     // those frames' vehicles come first in the records.
     let replayed = calib["input"]["frames_replayed"].as_u64().unwrap();
     assert!((30..200).contains(&replayed), "{replayed}");
-    // Every kept box became one vehicle record (VPout JSON; strict: serde_json read it).
+    // Every kept box became one vehicle record (VPout JSON; strict: serde_json read it),
+    // those the network did not see without VPs.
     let vehicles = vpcal_formats::reference::read_vpout(&out.path().join("vehicles.json")).unwrap();
+    let input = &calib["input"];
     assert_eq!(
         vehicles.len() as u64,
-        calib["input"]["vehicle_boxes"].as_u64().unwrap()
+        input["vehicle_boxes"].as_u64().unwrap() + input["followed_boxes"].as_u64().unwrap()
+    );
+    assert_eq!(
+        vehicles.iter().filter(|v| v.vp1.is_finite()).count() as u64,
+        input["vehicle_boxes"].as_u64().unwrap()
     );
     assert!(vehicles
         .windows(2)

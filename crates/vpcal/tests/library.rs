@@ -47,7 +47,32 @@ fn the_pipeline_calibrates_a_synthetic_clip_in_process() {
     config.bootstrap = 0;
     let out = run_pipeline(&dataset.join("video.mp4"), &config, &Silent).unwrap();
     assert_eq!(out.stats.frames, 40);
-    assert_eq!(out.records.len() as u64, out.stats.crops);
+    // Every kept box is a record; a few per followed vehicle went through the network.
+    assert_eq!(
+        out.records.len() as u64,
+        out.stats.crops + out.stats.crops_skipped
+    );
+    assert!(out.stats.crops_skipped > out.stats.crops, "{:?}", out.stats);
+    assert_eq!(
+        out.records
+            .iter()
+            .filter(|r| r.prediction.is_some())
+            .count() as u64,
+        out.stats.crops
+    );
+    // The boxes the network did not see carry their vehicle's VPs, copied, and their own
+    // edgelets.
+    let copied: Vec<_> = out
+        .records
+        .iter()
+        .filter(|r| r.prediction.is_none())
+        .collect();
+    assert!(copied.iter().all(|r| r.to_vehicle().copied));
+    assert!(
+        copied.iter().filter(|r| r.vp1.is_finite()).count() * 10 >= copied.len() * 9,
+        "most boxes not sent have their vehicle's VPs"
+    );
+    assert!(copied.iter().any(|r| !r.edgelets.is_empty()));
     let (cal, agg) = calibrate(&out, &config).unwrap();
     // The demo test's scene: within the same bounds.
     let focal_err = cal.focal_px / truth.focal_px - 1.0;

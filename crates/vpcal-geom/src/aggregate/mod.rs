@@ -40,6 +40,10 @@ pub struct VehicleVps {
     pub vp1_spread: Option<f64>,
     /// Decoder spread `D^s` of VP2 at the selected scale, when known.
     pub vp2_spread: Option<f64>,
+    /// The VPs are not the network's for this box but copied from an earlier box of the
+    /// same vehicle (the pipeline sends a few boxes per followed vehicle to the network):
+    /// the box counts for the tracks and its edgelets (gated by those VPs), not as rays.
+    pub copied: bool,
 }
 
 impl VehicleVps {
@@ -53,7 +57,14 @@ impl VehicleVps {
             frame: None,
             vp1_spread: None,
             vp2_spread: None,
+            copied: false,
         }
+    }
+
+    /// Whether the VPs are the network's own for this box, finite, above `min_score`: a
+    /// ray of the fits.
+    pub fn is_ray(&self, min_score: f64) -> bool {
+        !self.copied && self.score > min_score && self.vp1.is_finite() && self.vp2.is_finite()
     }
 }
 

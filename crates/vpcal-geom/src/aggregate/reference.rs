@@ -73,7 +73,7 @@ pub fn aggregate(
 ) -> Result<ReferenceResult, AggregateError> {
     let scored: Vec<&VehicleVps> = pairs
         .iter()
-        .filter(|p| p.score > options.min_score)
+        .filter(|p| p.score > options.min_score && !p.copied)
         .collect();
     let mut used: Vec<(Point2, Point2, f64)> = Vec::with_capacity(scored.len());
     for p in &scored {

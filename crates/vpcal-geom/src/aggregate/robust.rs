@@ -635,7 +635,7 @@ fn prepare(
     let mut rows = Vec::new();
     let mut row_unit = Vec::new();
     for (p, u) in pairs.iter().zip(pair_unit) {
-        if !(p.score > opts.min_score && p.vp1.is_finite() && p.vp2.is_finite()) {
+        if !p.is_ray(opts.min_score) {
             continue;
         }
         let Some(b) = p.box_px.filter(BoxPx::is_valid) else {

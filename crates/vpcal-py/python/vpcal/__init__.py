@@ -67,10 +67,11 @@ class Options:
       it they are stills of one camera; a video has its own rate).
     - Vehicles: ``detector`` (``"auto"``: the built-in learned YOLOX-nano; ``"yolox"``,
       ``"motion"``, ``"file:PATH"``, ``"yolox:PATH"``, ``"onnx:PATH"``), ``tiles``,
-      ``onnx_layout`` (``"yolo"``), ``motorcycles`` (False), ``road_mask`` (a PNG path, motion
-      detector), ``min_score`` (0.1), ``keep_static`` (False), ``max_per_frame`` (10).
+      ``every_tile`` (False: one tile per frame, in turn), ``onnx_layout`` (``"yolo"``),
+      ``motorcycles`` (False), ``road_mask`` (a PNG path, motion detector), ``min_score``
+      (0.1), ``keep_static`` (False), ``max_per_frame`` (10).
     - Network: ``model`` (the bundled one), ``device`` (``"cpu"``), ``batch`` (32),
-      ``flip_average`` (False).
+      ``flip_average`` (False), ``all_crops`` (False: a few boxes per followed vehicle).
     - Aggregation: ``method`` (``"robust"``, ``"robust-network"``, ``"reference"``),
       ``edgelets`` (True), ``replay`` (True), ``bootstrap`` (30), ``pp`` (``"centre"``,
       ``"bcs"`` or ``(x, y)``), ``focal`` (a known focal length, pixels), ``focal_range``
@@ -95,12 +96,14 @@ class Options:
     start: Optional[Union[int, str]] = None
     detector: Optional[str] = None
     tiles: Optional[int] = None
+    every_tile: Optional[bool] = None
     onnx_layout: Optional[str] = None
     motorcycles: Optional[bool] = None
     road_mask: Optional[str] = None
     min_score: Optional[float] = None
     keep_static: Optional[bool] = None
     max_per_frame: Optional[int] = None
+    all_crops: Optional[bool] = None
     method: Optional[str] = None
     bootstrap: Optional[int] = None
     pp: Optional[Union[str, Tuple[float, float]]] = None

@@ -159,6 +159,11 @@ pub struct PipelineArgs {
     /// At most this many boxes per frame, best scores first (0: no limit).
     #[arg(long, default_value_t = 10)]
     pub max_per_frame: usize,
+    /// Send every box of every frame through the VP network (and its edgelets), instead of
+    /// a few boxes per followed vehicle: its first, each 1.5 times larger than the last
+    /// sent, and boxes 2, 4, 8, ... of its track (slower; stills always send every box).
+    #[arg(long)]
+    pub all_crops: bool,
     /// Aggregation of the per-vehicle VPs: `robust` (VP1 from straight vehicle tracks when
     /// enough link up, else from the network's rays; the default), `robust-network` (VP1 from
     /// the network's rays) or `reference` (the paper's medians).
@@ -245,6 +250,10 @@ pub struct DetectorArgs {
     /// (0 up to 960 px, 2 above).
     #[arg(long, value_name = "N")]
     pub tiles: Option<u32>,
+    /// Look at every tile in every frame (slower), instead of the whole frame and one tile
+    /// per frame, the tiles in turn.
+    #[arg(long)]
+    pub every_tile: bool,
     /// Output layout of an `onnx:PATH` detector: yolo (v8/11), yolov5 or boxes-scores.
     #[arg(long, default_value = "yolo", value_parser = parse_layout)]
     pub onnx_layout: vpcal_video::detect::OnnxLayout,
@@ -277,6 +286,7 @@ impl DetectorArgs {
         let settings = DetectorSettings {
             choice,
             tiles: self.tiles,
+            every_tile: self.every_tile,
             onnx_layout: self.onnx_layout,
             motorcycles: self.motorcycles,
             road_mask: self.road_mask.clone(),
@@ -304,6 +314,7 @@ impl PipelineArgs {
             min_score: self.min_score,
             keep_static: self.keep_static,
             max_per_frame: self.max_per_frame,
+            all_crops: self.all_crops,
             method: self.method,
             bootstrap: self.bootstrap,
             pp: self.pp,
@@ -362,9 +373,10 @@ pub fn print_summary(out: &PipelineOutput, result: &Result<(Calibration, Aggrega
     row(
         "boxes",
         format!(
-            "{} detected, {} kept (dropped: {} low score, {} static, {} seen in an earlier \
-             picture, {} over the per-frame limit)",
+            "{} detected, {} kept, {} of them through the network (dropped: {} low score, {} \
+             static, {} seen in an earlier picture, {} over the per-frame limit)",
             s.detections,
+            s.crops + s.crops_skipped,
             s.crops,
             s.dropped_low_score,
             s.dropped_static,

@@ -4,6 +4,7 @@
 pub mod aggregate;
 pub mod args;
 pub mod bench_net;
+pub mod bench_pipeline;
 pub mod calibrate;
 pub mod data;
 pub mod demo;
