@@ -130,7 +130,7 @@ pub struct InputSummary {
     /// Vehicle boxes that reached the network (for a VPout file: its records).
     pub vehicle_boxes: u64,
     /// Boxes of vehicles followed from frame to frame that the network did not see again
-    /// (they count for the tracks; `calibrate --all-crops` sends every box).
+    /// (they count for the tracks; `calibrate --crops all` sends every box).
     pub followed_boxes: u64,
     pub seconds: f64,
 }

@@ -127,8 +127,8 @@ fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
     if let Some(v) = opt(d, "max_per_frame", "an int")? {
         c.max_per_frame = v;
     }
-    if let Some(v) = opt(d, "all_crops", "a bool")? {
-        c.all_crops = v;
+    if let Some(v) = parsed(d, "crops")? {
+        c.crops = v;
     }
     if let Some(v) = parsed(d, "method")? {
         c.method = v;

@@ -340,7 +340,7 @@ pub fn label_footage(
     let mut report = CameraReport::new(camera, input);
     // Training crops want every box the network can see, not a few per vehicle.
     let config = &PipelineConfig {
-        all_crops: true,
+        crops: crate::pipeline::CropPolicy::All,
         ..config.clone()
     };
     let out = run_pipeline(input, config, progress)?;

@@ -426,6 +426,7 @@ fn every_warning_the_library_writes_has_a_remedy() {
             FocalSource::Edgelets,
             Evidence {
                 curved_fit: true,
+                curved_focal: true,
                 vp1_from_tracks: true,
                 edgelet_focal_px: Some(cal.focal_px * 3.0),
                 ..Evidence::default()
@@ -506,7 +507,7 @@ fn record(frame: u64, b: BoxPx) -> VehicleRecord {
         score: 0.9,
         crop_box: b,
         det_box: b,
-        prediction: VpPrediction {
+        prediction: Some(VpPrediction {
             vp1: Point2::new(0.0, -3.0),
             vp2: Point2::new(-3.0, 0.0),
             vp1_scale: 0,
@@ -514,7 +515,7 @@ fn record(frame: u64, b: BoxPx) -> VehicleRecord {
             spreads: vec![[0.1, 0.1]],
             per_scale: vec![[Point2::new(0.0, -3.0), Point2::new(-3.0, 0.0)]],
             peaks: vec![[1.0, 1.0]],
-        },
+        }),
         vp1: Point2::new(c.x, c.y - 500.0),
         vp2: Point2::new(c.x - 2000.0, c.y),
         edgelets: Vec::new(),

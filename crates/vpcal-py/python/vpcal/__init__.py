@@ -71,7 +71,8 @@ class Options:
       ``motorcycles`` (False), ``road_mask`` (a PNG path, motion detector), ``min_score``
       (0.1), ``keep_static`` (False), ``max_per_frame`` (10).
     - Network: ``model`` (the bundled one), ``device`` (``"cpu"``), ``batch`` (32),
-      ``flip_average`` (False), ``all_crops`` (False: a few boxes per followed vehicle).
+      ``flip_average`` (False), ``crops`` (``"auto"``: a few boxes per followed vehicle above
+      960 px wide, every box below; ``"all"``, ``"few"``).
     - Aggregation: ``method`` (``"robust"``, ``"robust-network"``, ``"reference"``),
       ``edgelets`` (True), ``replay`` (True), ``bootstrap`` (30), ``pp`` (``"centre"``,
       ``"bcs"`` or ``(x, y)``), ``focal`` (a known focal length, pixels), ``focal_range``
@@ -103,7 +104,7 @@ class Options:
     min_score: Optional[float] = None
     keep_static: Optional[bool] = None
     max_per_frame: Optional[int] = None
-    all_crops: Optional[bool] = None
+    crops: Optional[str] = None
     method: Optional[str] = None
     bootstrap: Optional[int] = None
     pp: Optional[Union[str, Tuple[float, float]]] = None

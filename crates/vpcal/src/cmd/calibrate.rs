@@ -159,11 +159,12 @@ pub struct PipelineArgs {
     /// At most this many boxes per frame, best scores first (0: no limit).
     #[arg(long, default_value_t = 10)]
     pub max_per_frame: usize,
-    /// Send every box of every frame through the VP network (and its edgelets), instead of
-    /// a few boxes per followed vehicle: its first, each 1.5 times larger than the last
-    /// sent, and boxes 2, 4, 8, ... of its track (slower; stills always send every box).
-    #[arg(long)]
-    pub all_crops: bool,
+    /// Which boxes go through the VP network: `all` (every box of every frame), `few` (a
+    /// few per followed vehicle: its first, each 1.5 times larger than the last sent, and
+    /// boxes 2, 4, 8, ... of its track; the others carry their vehicle's VPs for their
+    /// edgelets) or `auto` (few above 960 px wide, all below). Stills always send every box.
+    #[arg(long, value_name = "POLICY", default_value = "auto")]
+    pub crops: vpcal::pipeline::CropPolicy,
     /// Aggregation of the per-vehicle VPs: `robust` (VP1 from straight vehicle tracks when
     /// enough link up, else from the network's rays; the default), `robust-network` (VP1 from
     /// the network's rays) or `reference` (the paper's medians).
@@ -314,7 +315,7 @@ impl PipelineArgs {
             min_score: self.min_score,
             keep_static: self.keep_static,
             max_per_frame: self.max_per_frame,
-            all_crops: self.all_crops,
+            crops: self.crops,
             method: self.method,
             bootstrap: self.bootstrap,
             pp: self.pp,
