@@ -271,7 +271,7 @@ impl RoadCamera {
 pub enum FocalRefit {
     /// The lengths measured it (`lengths`), and the file took `combined`.
     Measured {
-        lengths: crate::road_focal::LengthFocal,
+        lengths: Box<crate::road_focal::LengthFocal>,
         combined: crate::road_focal::CombinedFocal,
     },
     /// The file keeps its focal length, for this reason.

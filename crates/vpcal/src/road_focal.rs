@@ -96,7 +96,7 @@ pub struct LengthFocal {
 /// What the known lengths say about the focal length.
 #[derive(Debug, Clone, PartialEq)]
 pub enum LengthFocalFit {
-    Measured(LengthFocal),
+    Measured(Box<LengthFocal>),
     /// They do not fix it, and why (one direction only; no focal length explains them).
     NotIdentified(String),
 }
@@ -355,14 +355,14 @@ pub fn fit_focal_from_lengths(
             "the fitted focal length gives no camera".to_string(),
         );
     };
-    LengthFocalFit::Measured(LengthFocal {
+    LengthFocalFit::Measured(Box::new(LengthFocal {
         focal_px,
         interval_px: [focal_px * (-log_sd).exp(), focal_px * log_sd.exp()],
         log_sd,
         camera,
         chi2,
         dof,
-    })
+    }))
 }
 
 /// The calibration's focal length before the lengths: value, 68 % interval and source.
