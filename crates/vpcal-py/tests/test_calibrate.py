@@ -166,3 +166,26 @@ def test_tracks_and_speeds_with_a_scale(scene, truth):
     assert 0.5 * lo < med < 1.5 * hi, (med, lo, hi)
     t = moving[0]
     assert t.image_points.shape == (len(t.frames), 2) and t.road_points.shape == t.image_points.shape
+
+
+def test_known_lengths_in_two_directions_measure_the_focal_length(scene, truth):
+    cal = vpcal.calibrate(scene / "video.mp4", bootstrap=0)
+    ms = json.loads((scene / "gt_data.json").read_text())["distanceMeasurement"]
+    along = next(m for m in ms if m["toVP1"])
+    across = next(m for m in ms if not m["toVP1"])
+    lengths = [((*m["p1"][:2], *m["p2"][:2]), m["distance"]) for m in (along, across)]
+    # --keep-focal: only the scale changes.
+    kept = cal.with_scale(distances=lengths, keep_focal=True)
+    assert kept.focal_px == cal.focal_px
+    assert "distances_focal" not in (kept.to_dict().get("evidence") or {})
+    # By default the two directions measure it too (as `vpcal scale`).
+    doc = cal.with_scale(distances=lengths).to_dict()
+    measured = doc["evidence"]["distances_focal"]
+    # Their interval holds the truth (the fit keeps this short clip's horizon, which is off:
+    # 404 px, 68 % 301-542, for 330).
+    lo, hi = measured["interval_px"]
+    assert lo <= truth["focal_px"] <= hi, measured
+    assert doc["scale_m_per_unit"] > 0
+    # One direction fixes only the scale.
+    one = cal.with_scale(distances=lengths[:1]).to_dict()
+    assert one["focal_px"] == cal.focal_px
