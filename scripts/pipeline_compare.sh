@@ -1,8 +1,8 @@
 #!/bin/bash
 # The calibration with a few crops per followed vehicle and one detector tile per frame
-# (`--crops few`: the default above 960 px wide) against every box through the network and
-# every tile in every frame (`--crops all --every-tile`): per clip, status, VP1 shift, roll
-# and focal length of both.
+# (`--crops few --tile-rotation`) against every box through the network and every tile in
+# every frame (`--crops all`, the default at 960 px wide and below): per clip, status, VP1
+# shift, roll and focal length of both.
 # usage: scripts/pipeline_compare.sh OUT CLIP...   (VPCAL: the binary; FRAMES: 300)
 # Timings are not compared here (use `vpcal bench-pipeline` on a quiet machine).
 set -uo pipefail
@@ -11,8 +11,8 @@ OUT=${1:?usage: OUT CLIP...}; shift
 mkdir -p "$OUT"
 for c in "$@"; do
   n=$(basename "$c"); n=${n%.*}
-  "$V" calibrate "$c" --max-frames "${FRAMES:-300}" --quiet --crops few -o "$OUT/$n.default.json" > "$OUT/$n.default.log" 2>&1
-  "$V" calibrate "$c" --max-frames "${FRAMES:-300}" --quiet --crops all --every-tile \
+  "$V" calibrate "$c" --max-frames "${FRAMES:-300}" --quiet --crops few --tile-rotation -o "$OUT/$n.default.json" > "$OUT/$n.default.log" 2>&1
+  "$V" calibrate "$c" --max-frames "${FRAMES:-300}" --quiet --crops all \
     -o "$OUT/$n.all.json" > "$OUT/$n.all.log" 2>&1
 done
 python3 - "$OUT" "$@" <<'PY'

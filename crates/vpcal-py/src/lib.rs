@@ -172,8 +172,8 @@ fn detector_settings(d: &Bound<'_, PyDict>) -> PyResult<DetectorSettings> {
         s.choice = v;
     }
     s.tiles = opt(d, "tiles", "an int")?;
-    if let Some(v) = opt(d, "every_tile", "a bool")? {
-        s.every_tile = v;
+    if let Some(v) = opt(d, "tile_rotation", "a bool")? {
+        s.tile_rotation = v;
     }
     if let Some(v) = parsed(d, "onnx_layout")? {
         s.onnx_layout = v;

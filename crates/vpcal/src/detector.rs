@@ -13,8 +13,9 @@ pub struct DetectorSettings {
     /// Columns of square tiles a learned detector looks at besides the whole frame; `None`:
     /// [`default_tiles`] of the frame width.
     pub tiles: Option<u32>,
-    /// Look at every tile in every frame instead of one tile per frame in turn.
-    pub every_tile: bool,
+    /// Look at one tile per frame, in turn, instead of every tile in every frame (footage
+    /// only).
+    pub tile_rotation: bool,
     /// Output layout of an [`DetectorChoice::Onnx`] model.
     pub onnx_layout: OnnxLayout,
     /// Count COCO motorcycles as vehicles too.
@@ -28,7 +29,7 @@ impl Default for DetectorSettings {
         DetectorSettings {
             choice: DetectorChoice::Auto,
             tiles: None,
-            every_tile: false,
+            tile_rotation: false,
             onnx_layout: OnnxLayout::Yolo,
             motorcycles: false,
             road_mask: None,
@@ -135,7 +136,7 @@ pub fn open_detector(a: &DetectorSettings, info: &SourceInfo) -> Result<Box<dyn 
         classes: classes.clone(),
         tiles: a.tiles.unwrap_or_else(|| default_tiles(info.width)),
         // Stills are unrelated pictures: each must be looked at whole, every tile.
-        tile_rotation: !a.every_tile && !is_stills(info),
+        tile_rotation: a.tile_rotation && !is_stills(info),
         ..YoloxConfig::default()
     };
     match choice {

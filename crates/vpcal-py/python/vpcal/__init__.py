@@ -67,7 +67,7 @@ class Options:
       it they are stills of one camera; a video has its own rate).
     - Vehicles: ``detector`` (``"auto"``: the built-in learned YOLOX-nano; ``"yolox"``,
       ``"motion"``, ``"file:PATH"``, ``"yolox:PATH"``, ``"onnx:PATH"``), ``tiles``,
-      ``every_tile`` (False: one tile per frame, in turn), ``onnx_layout`` (``"yolo"``),
+      ``tile_rotation`` (False: every tile in every frame), ``onnx_layout`` (``"yolo"``),
       ``motorcycles`` (False), ``road_mask`` (a PNG path, motion detector), ``min_score``
       (0.1), ``keep_static`` (False), ``max_per_frame`` (10).
     - Network: ``model`` (the bundled one), ``device`` (``"cpu"``), ``batch`` (32),
@@ -97,7 +97,7 @@ class Options:
     start: Optional[Union[int, str]] = None
     detector: Optional[str] = None
     tiles: Optional[int] = None
-    every_tile: Optional[bool] = None
+    tile_rotation: Optional[bool] = None
     onnx_layout: Optional[str] = None
     motorcycles: Optional[bool] = None
     road_mask: Optional[str] = None

@@ -76,7 +76,9 @@ pub struct YoloxConfig {
     /// Look at one tile per frame, the tiles in turn (with the whole frame every frame),
     /// instead of every tile in every frame: a far vehicle, which only a tile finds, is
     /// then seen in every second frame of two tiles (the tracks bridge gaps of 8 frames),
-    /// for a third of the detector's time at 1080p with two columns of tiles.
+    /// for a third of the detector's time at 1080p with two columns of tiles. Off by
+    /// default: on the demo's 720p scene it found 20 % fewer boxes, and the roll, for want
+    /// of their edgelets, came out 2.5° off.
     pub tile_rotation: bool,
     /// Keep at most this many boxes per frame, best first.
     pub max_detections: usize,
@@ -90,7 +92,7 @@ impl Default for YoloxConfig {
             nms_iou: 0.45,
             tiles: 0,
             tile_overlap: 0.2,
-            tile_rotation: true,
+            tile_rotation: false,
             max_detections: 100,
         }
     }
