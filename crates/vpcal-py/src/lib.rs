@@ -616,11 +616,7 @@ fn set_scale(
             format!("--lane-points #{}", i - n + 1)
         }
     };
-    vpcal::road::fit_scale(&cam.cal, &inputs, flag).map_err(err)?;
-    if !keep_focal {
-        cam.refit_focal(&inputs);
-    }
-    cam.fit_and_set_scale(&inputs, flag, "calibration")
+    cam.apply_lengths(&inputs, flag, "calibration", keep_focal)
         .map_err(err)?;
     Ok(cam.file.to_json_string())
 }

@@ -151,9 +151,7 @@ pub fn calibrated_run_file(
         .collect();
     let flag = |i: usize| format!("--scale-points #{}", i + 1);
     let mut road = RoadCamera::new(file, "the calibration")?;
-    crate::road::fit_scale(&road.cal, &inputs, flag)?;
-    road.refit_focal(&inputs);
-    let fit = road.fit_and_set_scale(&inputs, flag, "the calibration")?;
+    let (_, fit) = road.apply_lengths(&inputs, flag, "the calibration", false)?;
     Ok((road.file, Some(fit.scale), road.cal))
 }
 

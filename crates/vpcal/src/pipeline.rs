@@ -465,6 +465,25 @@ impl EdgeletBudget {
     }
 }
 
+/// Only the edgelets of box `b` near the rays to `vp1` and `vp2` (the `gate` options) are
+/// kept (memory).
+fn near_vps(
+    gate: &EdgeletFitOptions,
+    b: &BoxPx,
+    vp1: Point2,
+    vp2: Point2,
+    edgelets: &[Edgelet],
+) -> Vec<Edgelet> {
+    near_rays(
+        b.center(),
+        vp1,
+        vp2,
+        edgelets,
+        gate.gate_vp2_deg,
+        gate.max_per_vehicle,
+    )
+}
+
 /// A crop waiting for its batch: frame, score, crop box, detector box, edgelets in the box,
 /// and the followed vehicle it belongs to.
 type Pending = (u64, f32, BoxPx, BoxPx, Vec<Edgelet>, Option<u64>);
@@ -603,14 +622,7 @@ impl<'a> Stages<'a> {
                 continue;
             };
             let crop_box = ib.to_box_px();
-            let index = self.records.len() + self.pending_meta.len() + self.waiting.len();
-            let t = Instant::now();
-            let edgelets = if self.config.edgelets && self.budget.keeps(index) {
-                edgelets_in_box(&frame.image, &crop_box, &self.edgelet_options)
-            } else {
-                Vec::new()
-            };
-            self.stats.stages.edgelets += t.elapsed().as_secs_f64();
+            let edgelets = self.box_edgelets(&frame.image, &crop_box);
             self.waiting.push(Waiting {
                 frame: frame.index,
                 score: d.score,
@@ -635,14 +647,7 @@ impl<'a> Stages<'a> {
             let src = sent[src];
             self.pending
                 .extend_from_slice(&batch.images[k * len..(k + 1) * len]);
-            let index = self.records.len() + self.pending_meta.len() + self.waiting.len();
-            let t = Instant::now();
-            let edgelets = if !self.config.edgelets || !self.budget.keeps(index) {
-                Vec::new()
-            } else {
-                edgelets_in_box(&frame.image, &bp, &self.edgelet_options)
-            };
-            self.stats.stages.edgelets += t.elapsed().as_secs_f64();
+            let edgelets = self.box_edgelets(&frame.image, &bp);
             let kept = &filtered.kept[src];
             self.pending_meta.push((
                 frame.index,
@@ -673,15 +678,7 @@ impl<'a> Stages<'a> {
             let prediction = p.vp;
             let vp1 = crop_box.frame_from_box(prediction.vp1);
             let vp2 = crop_box.frame_from_box(prediction.vp2);
-            // Only the edgelets near the network's VP rays are kept (memory).
-            let edgelets = near_rays(
-                crop_box.center(),
-                vp1,
-                vp2,
-                &edgelets,
-                self.gate.gate_vp2_deg,
-                self.gate.max_per_vehicle,
-            );
+            let edgelets = near_vps(&self.gate, &crop_box, vp1, vp2, &edgelets);
             self.records.push(VehicleRecord {
                 frame,
                 score,
@@ -703,6 +700,19 @@ impl<'a> Stages<'a> {
         Ok(())
     }
 
+    /// The edgelets in box `b` of `image` for the record about to be made (none with
+    /// `--no-edgelets` or where the edgelet budget skips it).
+    fn box_edgelets(&mut self, image: &RgbImage, b: &BoxPx) -> Vec<Edgelet> {
+        let index = self.records.len() + self.pending_meta.len() + self.waiting.len();
+        if !self.config.edgelets || !self.budget.keeps(index) {
+            return Vec::new();
+        }
+        let t = Instant::now();
+        let found = edgelets_in_box(image, b, &self.edgelet_options);
+        self.stats.stages.edgelets += t.elapsed().as_secs_f64();
+        found
+    }
+
     /// Records for the waiting boxes whose vehicle has network VPs now (copied to them;
     /// their edgelets gated by them); with `last`, also for the rest, without VPs.
     fn resolve_waiting(&mut self, last: bool) {
@@ -717,14 +727,7 @@ impl<'a> Stages<'a> {
             let nan = Point2::new(f64::NAN, f64::NAN);
             let (vp1, vp2) = vps.unwrap_or((nan, nan));
             let edgelets = match vps {
-                Some(_) => near_rays(
-                    w.crop_box.center(),
-                    vp1,
-                    vp2,
-                    &w.edgelets,
-                    self.gate.gate_vp2_deg,
-                    self.gate.max_per_vehicle,
-                ),
+                Some(_) => near_vps(&self.gate, &w.crop_box, vp1, vp2, &w.edgelets),
                 None => Vec::new(),
             };
             self.stats.stages.edgelets += t.elapsed().as_secs_f64();

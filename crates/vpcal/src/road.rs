@@ -102,6 +102,27 @@ impl RoadCamera {
         Ok(below)
     }
 
+    /// Known lengths `inputs` into the file, as `vpcal scale` does: each checked on the
+    /// file's camera before anything changes, then (unless `keep_focal`) the focal length
+    /// they measure ([`RoadCamera::refit_focal`]), then the scale on the resulting camera
+    /// ([`RoadCamera::fit_and_set_scale`]). Returns what became of the focal length (`None`
+    /// with `keep_focal`) and the scale's fit.
+    ///
+    /// # Errors
+    /// As [`fit_scale`]; a scale the file refuses.
+    pub fn apply_lengths(
+        &mut self,
+        inputs: &[ScaleInput],
+        flag_of: impl Fn(usize) -> String,
+        origin: &str,
+        keep_focal: bool,
+    ) -> Result<(Option<FocalRefit>, ScaleFit)> {
+        fit_scale(&self.cal, inputs, &flag_of)?;
+        let focal = (!keep_focal).then(|| self.refit_focal(inputs));
+        let fit = self.fit_and_set_scale(inputs, &flag_of, origin)?;
+        Ok((focal, fit))
+    }
+
     /// Fit the metric scale of `inputs` (as `vpcal scale`: [`fit_scale`]) and put it into the
     /// file: the scale, the first known distance as its reference, and its source. `flag_of`
     /// names measurement `i` in errors; `origin` the file.

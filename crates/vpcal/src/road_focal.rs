@@ -124,6 +124,30 @@ fn units(cal: &Calibration, m: &ScaleInput) -> Option<f64> {
     (u.is_finite() && u > 0.0).then_some(u)
 }
 
+/// Input `m` with coordinate `coord` of its pixels (0, 1: x, y of the first; 2, 3: of the
+/// second) moved by `h` pixels.
+fn nudged(mut m: ScaleInput, coord: usize, h: f64) -> ScaleInput {
+    let p = if coord < 2 {
+        &mut m.known.p1
+    } else {
+        &mut m.known.p2
+    };
+    if coord % 2 == 0 {
+        p.x += h;
+    } else {
+        p.y += h;
+    }
+    m
+}
+
+/// The relative standard deviation of a known length of `kind`.
+fn length_rel_sd(kind: RoadMeasure) -> f64 {
+    match kind {
+        RoadMeasure::Distance => DISTANCE_REL_SD,
+        RoadMeasure::LaneWidth => LANE_WIDTH_REL_SD,
+    }
+}
+
 /// The variance of `ln(measured length)` of each input on `cal`: its clicks (numerically,
 /// [`CLICK_SD_PX`] per coordinate) and its known length's relative error.
 fn log_variances(cal: &Calibration, inputs: &[ScaleInput]) -> Option<Vec<f64>> {
@@ -133,26 +157,11 @@ fn log_variances(cal: &Calibration, inputs: &[ScaleInput]) -> Option<Vec<f64>> {
             let base = units(cal, m)?.ln();
             let mut var = 0.0;
             for coord in 0..4 {
-                let mut moved = *m;
-                let h = CLICK_SD_PX;
-                let p = if coord < 2 {
-                    &mut moved.known.p1
-                } else {
-                    &mut moved.known.p2
-                };
-                if coord % 2 == 0 {
-                    p.x += h;
-                } else {
-                    p.y += h;
-                }
+                let moved = nudged(*m, coord, CLICK_SD_PX);
                 let d = units(cal, &moved).map_or(0.0, |u| u.ln() - base);
                 var += d * d;
             }
-            let rel = match m.kind {
-                RoadMeasure::Distance => DISTANCE_REL_SD,
-                RoadMeasure::LaneWidth => LANE_WIDTH_REL_SD,
-            };
-            Some(var + rel * rel)
+            Some(var + length_rel_sd(m.kind).powi(2))
         })
         .collect()
 }
@@ -286,16 +295,7 @@ pub fn fit_focal_from_lengths(
         for coord in 0..4 {
             let moved = |h: f64| {
                 let mut v = inputs.to_vec();
-                let p = if coord < 2 {
-                    &mut v[i].known.p1
-                } else {
-                    &mut v[i].known.p2
-                };
-                if coord % 2 == 0 {
-                    p.x += h;
-                } else {
-                    p.y += h;
-                }
+                v[i] = nudged(v[i], coord, h);
                 v
             };
             add(
@@ -303,10 +303,7 @@ pub fn fit_focal_from_lengths(
                 solve(cal.vp1, cal.horizon, &moved(-CLICK_SD_PX)),
             );
         }
-        let rel = match inputs[i].kind {
-            RoadMeasure::Distance => DISTANCE_REL_SD,
-            RoadMeasure::LaneWidth => LANE_WIDTH_REL_SD,
-        };
+        let rel = length_rel_sd(inputs[i].kind);
         let scaled = |k: f64| {
             let mut v = inputs.to_vec();
             v[i].known.distance_m *= k;

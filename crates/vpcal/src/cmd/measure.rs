@@ -168,11 +168,9 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
             format!("--lane-points #{}", i - n_dist + 1)
         }
     };
-    // Every length is checked on the file's camera before anything changes.
-    vpcal::road::fit_scale(&f.cal, &inputs, flag_of)?;
     let before = (f.cal.focal_px, f.file.focal_source.clone());
-    let focal = (!a.keep_focal).then(|| f.refit_focal(&inputs));
-    let fit = f.fit_and_set_scale(&inputs, flag_of, &a.calib.display().to_string())?;
+    let origin = a.calib.display().to_string();
+    let (focal, fit) = f.apply_lengths(&inputs, flag_of, &origin, a.keep_focal)?;
     let out = a.output.as_deref().unwrap_or(&a.calib);
     f.file.write(out)?;
     let height = f.file.camera_height_m.unwrap_or(f64::NAN);
