@@ -14,7 +14,7 @@ OUT=${1:?usage: scripts/plausibility_table.sh OUT [MAX_FRAMES] [CLIP...]}
 FRAMES=${2:-300}
 shift $(( $# >= 2 ? 2 : 1 ))
 DATA=${VPCAL_DATA:-../shared/data}
-VPCAL=${CARGO_TARGET_DIR:-target}/release/vpcal
+VPCAL=${VPCAL:-${CARGO_TARGET_DIR:-target}/release/vpcal}
 mkdir -p "$OUT"
 if [ $# -gt 0 ]; then
     CLIPS=("$@")

@@ -51,12 +51,29 @@ pub enum GeomError {
     #[error("vp1 and vp2 coincide at {0}")]
     CoincidentVps(Point2),
     /// `-(vp1 - pp)·(vp2 - pp)` is not positive: the pair is not orthogonal for any real focal.
-    #[error("imaginary focal length: -(vp1-pp)·(vp2-pp) = {value} is not positive")]
+    #[error(
+        "the vanishing points give no real focal length: VP1 and VP2 lie on the same side of \
+         the principal point (-(vp1-pp)·(vp2-pp) = {} px², which must be positive)",
+        fmt_square_px(*value)
+    )]
     ImaginaryFocal { value: f64 },
     /// The horizon passes through the principal point: the camera looks parallel to the road
     /// and the road plane cannot be intersected.
     #[error("the horizon passes through the principal point: the road plane is edge-on")]
     EdgeOnRoad,
+}
+
+/// A squared pixel distance for a message: a few significant figures, not float noise.
+fn fmt_square_px(value: f64) -> String {
+    if !value.is_finite() {
+        return format!("{value}");
+    }
+    let a = value.abs();
+    if a >= 1e6 {
+        format!("{value:.2e}")
+    } else {
+        format!("{value:.0}")
+    }
 }
 
 /// Focal length in pixels from two orthogonal VPs and the principal point, or `None` when the

@@ -558,7 +558,11 @@ fn render_report(
         .map(serde_json::from_str)
         .transpose()
         .map_err(|e| PyValueError::new_err(format!("tracks: not a JSON document: {e}")))?;
-    let list = doc.as_ref().map(vpcal::report::tracks_from_json);
+    let list = doc
+        .as_ref()
+        .map(vpcal::output::tracks_from_doc)
+        .transpose()
+        .map_err(|e| PyValueError::new_err(format!("tracks: {e}")))?;
     let note = doc
         .as_ref()
         .and_then(|d| d.get("note"))

@@ -760,6 +760,28 @@ fn tracks_from_csv(text: &str) -> Result<SavedTracks, String> {
 
 fn tracks_from_json(text: &str) -> Result<SavedTracks, String> {
     let doc: Value = serde_json::from_str(text).map_err(|e| format!("not a JSON document: {e}"))?;
+    let tracks = tracks_from_doc(&doc)?;
+    let size = doc
+        .get("width")
+        .and_then(Value::as_u64)
+        .zip(doc.get("height").and_then(Value::as_u64))
+        .and_then(|(w, h)| Some((u32::try_from(w).ok()?, u32::try_from(h).ok()?)));
+    Ok(SavedTracks {
+        input: doc.get("input").and_then(Value::as_str).map(str::to_string),
+        fps: doc.get("fps").and_then(Value::as_f64),
+        size,
+        tracks: tracks.into_iter().map(|t| t.points).collect(),
+    })
+}
+
+/// The tracks of a `vpcal-tracks/1` document ([`tracks_json`]): points (with their road
+/// points where the file has them), speeds, lanes and directions. The file has no boxes and
+/// no BrnoCompSpeed paths (`path` stays empty).
+///
+/// # Errors
+/// Another format, or a track whose point lists are missing, not numbers, or not equally
+/// long (the message names the field, e.g. `tracks[3].x_px`).
+pub fn tracks_from_doc(doc: &Value) -> Result<Vec<VehicleTrack>, String> {
     match doc.get("format").and_then(Value::as_str) {
         Some("vpcal-tracks/1") => {}
         other => {
@@ -773,53 +795,95 @@ fn tracks_from_json(text: &str) -> Result<SavedTracks, String> {
         .get("tracks")
         .and_then(Value::as_array)
         .ok_or("field \"tracks\" must be a list")?;
-    let mut tracks = Vec::new();
-    for (k, t) in list.iter().enumerate() {
-        let numbers = |name: &str| -> Result<Vec<f64>, String> {
-            t.get(name)
-                .and_then(Value::as_array)
-                .and_then(|a| a.iter().map(Value::as_f64).collect::<Option<Vec<f64>>>())
-                .ok_or(format!("tracks[{k}].{name} must be a list of numbers"))
-        };
-        let frames = numbers("frames")?;
-        let times = numbers("time_s")?;
-        let xs = numbers("x_px")?;
-        let ys = numbers("y_px")?;
-        let clipped: Vec<bool> = t
-            .get("clipped")
+    list.iter()
+        .enumerate()
+        .map(|(k, t)| track_from_json(k, t))
+        .collect()
+}
+
+fn track_from_json(k: usize, t: &Value) -> Result<VehicleTrack, String> {
+    let list = |name: &str| -> Result<&Vec<Value>, String> {
+        t.get(name)
             .and_then(Value::as_array)
-            .and_then(|a| a.iter().map(Value::as_bool).collect::<Option<Vec<bool>>>())
-            .ok_or(format!("tracks[{k}].clipped must be a list of true/false"))?;
-        let n = frames.len();
-        if [times.len(), xs.len(), ys.len(), clipped.len()] != [n; 4] {
-            return Err(format!(
-                "tracks[{k}]: frames, time_s, x_px, y_px and clipped must be equally long"
-            ));
+            .ok_or(format!("tracks[{k}].{name} must be a list"))
+    };
+    let numbers = |name: &str| -> Result<Vec<f64>, String> {
+        list(name)?
+            .iter()
+            .map(Value::as_f64)
+            .collect::<Option<Vec<f64>>>()
+            .ok_or(format!("tracks[{k}].{name} must be a list of numbers"))
+    };
+    // Road points are null where a point has none; the lists may be absent (no camera).
+    let optional = |name: &str| -> Result<Vec<Option<f64>>, String> {
+        match t.get(name) {
+            None | Some(Value::Null) => Ok(Vec::new()),
+            Some(v) => v
+                .as_array()
+                .map(|a| a.iter().map(Value::as_f64).collect())
+                .ok_or(format!(
+                    "tracks[{k}].{name} must be a list of numbers or nulls"
+                )),
         }
-        tracks.push(
-            (0..n)
-                .map(|i| crate::tracks::TrackPoint {
-                    // Why: frame indices are whole, non-negative numbers in the file.
-                    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                    frame: frames[i].max(0.0) as u64,
-                    time_s: times[i],
-                    image: vpcal_geom::Point2::new(xs[i], ys[i]),
-                    clipped: clipped[i],
-                    road_m: None,
-                })
-                .collect(),
-        );
+    };
+    let frames = numbers("frames")?;
+    let times = numbers("time_s")?;
+    let xs = numbers("x_px")?;
+    let ys = numbers("y_px")?;
+    let clipped: Vec<bool> = list("clipped")?
+        .iter()
+        .map(Value::as_bool)
+        .collect::<Option<Vec<bool>>>()
+        .ok_or(format!("tracks[{k}].clipped must be a list of true/false"))?;
+    let (road_x, road_y) = (optional("road_x_m")?, optional("road_y_m")?);
+    let n = frames.len();
+    if [times.len(), xs.len(), ys.len(), clipped.len()] != [n; 4] {
+        return Err(format!(
+            "tracks[{k}]: frames, time_s, x_px, y_px and clipped must be equally long"
+        ));
     }
-    let size = doc
-        .get("width")
-        .and_then(Value::as_u64)
-        .zip(doc.get("height").and_then(Value::as_u64))
-        .and_then(|(w, h)| Some((u32::try_from(w).ok()?, u32::try_from(h).ok()?)));
-    Ok(SavedTracks {
-        input: doc.get("input").and_then(Value::as_str).map(str::to_string),
-        fps: doc.get("fps").and_then(Value::as_f64),
-        size,
-        tracks,
+    let points = (0..n)
+        .map(|i| crate::tracks::TrackPoint {
+            // Why: frame indices are whole, non-negative numbers in the file.
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            frame: frames[i].max(0.0) as u64,
+            time_s: times[i],
+            image: vpcal_geom::Point2::new(xs[i], ys[i]),
+            clipped: clipped[i],
+            road_m: road_x
+                .get(i)
+                .copied()
+                .flatten()
+                .zip(road_y.get(i).copied().flatten())
+                .map(|(x, y)| [x, y]),
+        })
+        .collect();
+    let number = |name: &str| t.get(name).and_then(Value::as_f64);
+    let speed = number("speed_kmh").map(|kmh| crate::tracks::SpeedEstimate {
+        kmh,
+        uncertainty_kmh: number("speed_uncertainty_kmh").unwrap_or(f64::NAN),
+        fit_kmh: number("speed_fit_kmh").unwrap_or(f64::NAN),
+        windows: t
+            .get("speed_windows")
+            .and_then(Value::as_u64)
+            .and_then(|w| usize::try_from(w).ok())
+            .unwrap_or(0),
+    });
+    Ok(VehicleTrack {
+        id: t.get("id").and_then(Value::as_u64).unwrap_or(0),
+        points,
+        speed,
+        lateral_m: number("lateral_m"),
+        lane: t
+            .get("lane")
+            .and_then(Value::as_u64)
+            .and_then(|l| usize::try_from(l).ok()),
+        towards_vp1: match t.get("direction").and_then(Value::as_str) {
+            Some("towards_vp1") => Some(true),
+            Some("from_vp1") => Some(false),
+            _ => None,
+        },
+        path: Vec::new(),
     })
 }
 

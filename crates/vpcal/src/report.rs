@@ -16,10 +16,9 @@ use std::path::Path;
 use serde_json::Value;
 use vpcal_formats::calib::{CalibrationFile, Status};
 use vpcal_geom::aggregate::robust::{focal_prior_range_widths, TRAFFIC_FOV_DEG};
-use vpcal_geom::Point2;
 
 use crate::overlay::nice_step;
-use crate::tracks::{SpeedEstimate, TrackPoint, VehicleTrack};
+use crate::tracks::VehicleTrack;
 
 /// What a report shows besides the calibration file.
 #[derive(Debug, Clone, Copy, Default)]
@@ -1392,91 +1391,6 @@ pub fn render_with(file: &CalibrationFile, input: &ReportInput<'_>) -> String {
          self-contained (no network access).</p></footer></body></html>\n",
     );
     s
-}
-
-// -- tracks from their JSON ----------------------------------------------------------------
-
-/// The tracks of a `vpcal-tracks/1` document (`output::tracks_json`), for a report from a
-/// tracks file or from Python: boxes are not in that file (each point gets an empty box at its
-/// contact point) nor are the BrnoCompSpeed paths.
-pub fn tracks_from_json(doc: &Value) -> Vec<VehicleTrack> {
-    let Some(list) = doc.get("tracks").and_then(Value::as_array) else {
-        return Vec::new();
-    };
-    let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
-    let arr = |t: &Value, k: &str| -> Vec<Value> {
-        t.get(k)
-            .and_then(Value::as_array)
-            .cloned()
-            .unwrap_or_default()
-    };
-    list.iter()
-        .map(|t| {
-            let frames = arr(t, "frames");
-            let (ts, xs, ys, clipped) = (
-                arr(t, "time_s"),
-                arr(t, "x_px"),
-                arr(t, "y_px"),
-                arr(t, "clipped"),
-            );
-            let (rx, ry) = (arr(t, "road_x_m"), arr(t, "road_y_m"));
-            let points = (0..frames.len())
-                .map(|i| {
-                    let image =
-                        Point2::new(xs.get(i).map_or(f64::NAN, f), ys.get(i).map_or(f64::NAN, f));
-                    let road = match (
-                        rx.get(i).and_then(Value::as_f64),
-                        ry.get(i).and_then(Value::as_f64),
-                    ) {
-                        (Some(x), Some(y)) => Some([x, y]),
-                        _ => None,
-                    };
-                    TrackPoint {
-                        frame: frames[i].as_u64().unwrap_or(0),
-                        time_s: ts.get(i).map_or(f64::NAN, f),
-                        image,
-                        clipped: clipped.get(i).and_then(Value::as_bool).unwrap_or(false),
-                        road_m: road,
-                    }
-                })
-                .collect();
-            let speed = t
-                .get("speed_kmh")
-                .and_then(Value::as_f64)
-                .map(|kmh| SpeedEstimate {
-                    kmh,
-                    uncertainty_kmh: t
-                        .get("speed_uncertainty_kmh")
-                        .and_then(Value::as_f64)
-                        .unwrap_or(f64::NAN),
-                    fit_kmh: t
-                        .get("speed_fit_kmh")
-                        .and_then(Value::as_f64)
-                        .unwrap_or(f64::NAN),
-                    windows: t
-                        .get("speed_windows")
-                        .and_then(Value::as_u64)
-                        .and_then(|w| usize::try_from(w).ok())
-                        .unwrap_or(0),
-                });
-            VehicleTrack {
-                id: t.get("id").and_then(Value::as_u64).unwrap_or(0),
-                points,
-                speed,
-                lateral_m: t.get("lateral_m").and_then(Value::as_f64),
-                lane: t
-                    .get("lane")
-                    .and_then(Value::as_u64)
-                    .and_then(|l| usize::try_from(l).ok()),
-                towards_vp1: match t.get("direction").and_then(Value::as_str) {
-                    Some("towards_vp1") => Some(true),
-                    Some("from_vp1") => Some(false),
-                    _ => None,
-                },
-                path: Vec::new(),
-            }
-        })
-        .collect()
 }
 
 #[cfg(test)]
