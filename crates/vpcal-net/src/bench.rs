@@ -11,7 +11,8 @@ use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
 use serde::Serialize;
 
-use crate::config::ModelConfig;
+use crate::config::{Encoder, ModelConfig};
+use crate::encoder::EncoderNet;
 use crate::metrics::median;
 use crate::model::StackedHourglass;
 use crate::network::to_vec;
@@ -68,7 +69,26 @@ fn time<F: FnMut() -> Result<(), NetError>>(
     Ok(out)
 }
 
-/// Benchmark `config` on `device` (a plain, non-autodiff device).
+/// The heatmap networks' forward pass, for timing either.
+trait Heatmaps: Module + Clone + 'static {
+    fn heatmaps(&self, images: Tensor<4>) -> Vec<Tensor<4>>;
+}
+
+impl Heatmaps for StackedHourglass {
+    fn heatmaps(&self, images: Tensor<4>) -> Vec<Tensor<4>> {
+        self.forward(images)
+    }
+}
+
+impl Heatmaps for EncoderNet {
+    fn heatmaps(&self, images: Tensor<4>) -> Vec<Tensor<4>> {
+        self.forward(images)
+    }
+}
+
+/// Benchmark `config` on `device` (a plain, non-autodiff device): the stacked hourglass, or
+/// the pretrained-encoder network for [`Encoder::YoloxNano`] (randomly initialised here; the
+/// time does not depend on the weights).
 ///
 /// # Errors
 /// [`NetError::Config`] for an invalid config; [`NetError::Tensor`] when outputs cannot be read.
@@ -78,17 +98,33 @@ pub fn run(
     opts: &BenchOptions,
 ) -> Result<BenchResult, NetError> {
     config.validate()?;
+    device.seed(0);
+    match config.encoder {
+        Encoder::Hourglass => {
+            run_model(StackedHourglass::new(config, device), config, device, opts)
+        }
+        Encoder::YoloxNano => run_model(EncoderNet::new(config, device), config, device, opts),
+    }
+}
+
+fn run_model<M: Heatmaps>(
+    model: M,
+    config: &ModelConfig,
+    device: &Device,
+    opts: &BenchOptions,
+) -> Result<BenchResult, NetError> {
     let s = config.input_size;
     let r = config.heatmap_size;
-    device.seed(0);
-    let model = StackedHourglass::new(config, device);
     let params = model.num_params();
 
     let eval = model.valid();
     let x = Tensor::<4>::random([opts.forward_batch, 3, s, s], Distribution::Default, device);
     let forward_runs = time(opts.warmup, opts.runs, || {
-        let out = eval.forward_last(x.clone());
-        to_vec(out).map(|_| ())
+        let outs = eval.heatmaps(x.clone());
+        match outs.into_iter().last() {
+            Some(out) => to_vec(out).map(|_| ()),
+            None => Err(NetError::Config("model has no output".into())),
+        }
     })?;
 
     let ad = device.clone().autodiff();
@@ -101,7 +137,7 @@ pub fn run(
         &ad,
     );
     let train_runs = time(opts.warmup, opts.runs, || {
-        let outs = train_model.forward(xb.clone());
+        let outs = train_model.heatmaps(xb.clone());
         let mut loss: Option<Tensor<1>> = None;
         for o in outs {
             let l = (o - yb.clone()).square().mean();

@@ -30,9 +30,39 @@ pub enum Normalisation {
     MeanStd { mean: [f32; 3], std: [f32; 3] },
 }
 
-/// Size, layout and input conventions of the stacked-hourglass VP network (DESIGN.md §5).
+/// The feature extractor in front of the heatmap outputs.
+///
+/// Checkpoints written before this field existed lack it and load as [`Encoder::Hourglass`];
+/// hourglass configs are still written without it, so their JSON is unchanged.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Encoder {
+    /// The paper's stacked hourglass ([`StackedHourglass`](crate::StackedHourglass)), trained
+    /// from scratch.
+    #[default]
+    Hourglass,
+    /// The backbone of the COCO-pretrained YOLOX-nano detector with an FPN-lite decoder
+    /// ([`EncoderNet`](crate::encoder::EncoderNet)).
+    YoloxNano,
+}
+
+impl Encoder {
+    /// Whether this is the default, [`Encoder::Hourglass`] (serde's `skip_serializing_if`).
+    pub fn is_hourglass(&self) -> bool {
+        *self == Encoder::Hourglass
+    }
+}
+
+/// Size, layout and input conventions of the VP network: the stacked hourglass of DESIGN.md §5
+/// or, with [`Encoder::YoloxNano`], the pretrained-encoder network
+/// ([`EncoderNet`](crate::encoder::EncoderNet)), which uses `input_size`, `heatmap_size`,
+/// `channels` (decoder width), `scales` and the batch-norm settings, and requires `stacks` 1,
+/// RGB order and unit normalisation (the encoder converts to the detector's BGR 0-255 itself).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ModelConfig {
+    /// The feature extractor (absent in older checkpoints: the hourglass).
+    #[serde(default, skip_serializing_if = "Encoder::is_hourglass")]
+    pub encoder: Encoder,
     /// Side of the square input crop, pixels (paper: 128).
     pub input_size: usize,
     /// Side of the square output heatmaps, pixels (paper: 64). `input_size / heatmap_size`
@@ -66,6 +96,7 @@ impl ModelConfig {
     /// (batch-norm running statistics included; see [`StackedHourglass::new`](crate::StackedHourglass::new)).
     pub fn paper() -> Self {
         ModelConfig {
+            encoder: Encoder::Hourglass,
             input_size: 128,
             heatmap_size: 64,
             stacks: 2,
@@ -109,10 +140,26 @@ impl ModelConfig {
         }
     }
 
-    /// Names accepted by [`ModelConfig::preset`].
-    pub const PRESETS: [&'static str; 3] = ["paper", "small", "tiny"];
+    /// The pretrained-encoder network: the YOLOX-nano backbone (COCO weights, 0.46 M
+    /// parameters) on 128x128 crops, an FPN-lite decoder of width 64 down to stride 4, 32x32
+    /// heatmaps at the paper's scales.
+    pub fn yolox_nano() -> Self {
+        ModelConfig {
+            encoder: Encoder::YoloxNano,
+            input_size: 128,
+            heatmap_size: 32,
+            stacks: 1,
+            front_channels: 0,
+            channels: 64,
+            depth: 0,
+            ..Self::paper()
+        }
+    }
 
-    /// A preset by name: `paper`, `small` or `tiny`.
+    /// Names accepted by [`ModelConfig::preset`].
+    pub const PRESETS: [&'static str; 4] = ["paper", "small", "tiny", "yolox_nano"];
+
+    /// A preset by name: `paper`, `small`, `tiny` or `yolox_nano`.
     ///
     /// # Errors
     /// [`NetError::Config`] for any other name.
@@ -121,6 +168,7 @@ impl ModelConfig {
             "paper" => Ok(Self::paper()),
             "small" => Ok(Self::small()),
             "tiny" => Ok(Self::tiny()),
+            "yolox_nano" => Ok(Self::yolox_nano()),
             other => Err(NetError::Config(format!(
                 "unknown model preset {other:?} (expected one of {:?})",
                 Self::PRESETS
@@ -165,6 +213,10 @@ impl ModelConfig {
                 self.input_size, self.heatmap_size
             ));
         }
+        self.validate_common()?;
+        if self.encoder == Encoder::YoloxNano {
+            return self.validate_yolox();
+        }
         if self.stacks == 0 || self.depth == 0 {
             return bad(format!(
                 "stacks {} and depth {} must be at least 1",
@@ -190,6 +242,12 @@ impl ModelConfig {
                 self.channels
             ));
         }
+        Ok(())
+    }
+
+    /// Checks shared by every encoder: scales, batch norm, normalisation.
+    fn validate_common(&self) -> Result<(), NetError> {
+        let bad = |msg: String| Err(NetError::Config(msg));
         if self.scales.is_empty() || self.scales.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
             return bad(format!(
                 "scales {:?} must be non-empty, finite and positive",
@@ -213,6 +271,36 @@ impl ModelConfig {
         Ok(())
     }
 
+    /// Checks of the pretrained-encoder network (see [`Encoder::YoloxNano`]).
+    fn validate_yolox(&self) -> Result<(), NetError> {
+        let bad = |msg: String| Err(NetError::Config(msg));
+        let stride = self.input_size / self.heatmap_size;
+        if !(2..=32).contains(&stride) || !self.input_size.is_multiple_of(32) {
+            return bad(format!(
+                "encoder yolox_nano: input_size {} must be a multiple of 32 and heatmap_size {} \
+                 1/2 to 1/32 of it (a backbone stride: 2, 4, 8, 16 or 32)",
+                self.input_size, self.heatmap_size
+            ));
+        }
+        if self.stacks != 1 {
+            return bad(format!(
+                "encoder yolox_nano: stacks {} must be 1 (one heatmap output)",
+                self.stacks
+            ));
+        }
+        if self.channels == 0 {
+            return bad("encoder yolox_nano: channels (decoder width) must be positive".into());
+        }
+        if self.channel_order != ChannelOrder::Rgb || self.normalisation != Normalisation::Unit {
+            return bad(format!(
+                "encoder yolox_nano: channel_order {:?} and normalisation {:?} must be rgb and \
+                 unit (the encoder converts to the detector's BGR 0-255 input itself)",
+                self.channel_order, self.normalisation
+            ));
+        }
+        Ok(())
+    }
+
     /// Fields in which `self` and `other` differ, as `name: self vs other` lines (empty when equal).
     pub fn differences(&self, other: &ModelConfig) -> Vec<String> {
         let mut out = Vec::new();
@@ -224,6 +312,7 @@ impl ModelConfig {
             )*};
         }
         cmp!(
+            encoder,
             input_size,
             heatmap_size,
             stacks,
@@ -264,6 +353,36 @@ mod tests {
         let err = c.validate().unwrap_err().to_string();
         assert!(err.contains("depth 8"), "{err}");
         assert!(ModelConfig::preset("huge").is_err());
+    }
+
+    #[test]
+    fn configs_without_an_encoder_are_the_hourglass_and_stay_unchanged() {
+        let text = serde_json::to_string(&ModelConfig::small()).unwrap();
+        assert!(!text.contains("encoder"), "{text}");
+        let back: ModelConfig = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.encoder, Encoder::Hourglass);
+        let y = ModelConfig::yolox_nano();
+        let text = serde_json::to_string(&y).unwrap();
+        assert!(text.contains(r#""encoder":"yolox_nano""#), "{text}");
+        assert_eq!(serde_json::from_str::<ModelConfig>(&text).unwrap(), y);
+        let d = ModelConfig::small().differences(&y);
+        assert!(d.iter().any(|l| l.starts_with("encoder: ")), "{d:?}");
+    }
+
+    #[test]
+    fn yolox_configs_are_checked() {
+        let mut c = ModelConfig::yolox_nano();
+        c.heatmap_size = 128;
+        let err = c.validate().unwrap_err().to_string();
+        assert!(err.contains("heatmap_size 128"), "{err}");
+        let mut c = ModelConfig::yolox_nano();
+        c.channel_order = ChannelOrder::Bgr;
+        let err = c.validate().unwrap_err().to_string();
+        assert!(err.contains("rgb and unit"), "{err}");
+        let mut c = ModelConfig::yolox_nano();
+        c.input_size = 64;
+        c.heatmap_size = 2;
+        c.validate().unwrap();
     }
 
     #[test]

@@ -18,7 +18,8 @@ use image::imageops::FilterType;
 use image::RgbImage;
 use vpcal_geom::heatmap::{DecodeMode, HeatmapCodec, VpPrediction};
 
-use crate::config::ModelConfig;
+use crate::config::{Encoder, ModelConfig};
+use crate::encoder::EncoderNet;
 use crate::model::StackedHourglass;
 use crate::network::{to_vec, VpNetwork};
 use crate::store::WeightsFile;
@@ -34,10 +35,82 @@ pub struct CropPrediction {
     pub heatmaps: Vec<f32>,
 }
 
+/// The heatmap networks [`VpNet`] can run, chosen by the checkpoint's config.
+#[derive(Debug, Clone)]
+pub enum VpModel {
+    /// The stacked hourglass ([`Encoder::Hourglass`]).
+    Hourglass(Box<StackedHourglass>),
+    /// The pretrained-encoder network ([`Encoder::YoloxNano`]).
+    Encoder(Box<EncoderNet>),
+}
+
+impl From<StackedHourglass> for VpModel {
+    fn from(m: StackedHourglass) -> Self {
+        VpModel::Hourglass(Box::new(m))
+    }
+}
+
+impl From<EncoderNet> for VpModel {
+    fn from(m: EncoderNet) -> Self {
+        VpModel::Encoder(Box::new(m))
+    }
+}
+
+impl VpModel {
+    /// The stacked hourglass, if it is one.
+    pub fn as_hourglass(&self) -> Option<&StackedHourglass> {
+        match self {
+            VpModel::Hourglass(m) => Some(m),
+            VpModel::Encoder(_) => None,
+        }
+    }
+
+    /// The pretrained-encoder network, if it is one.
+    pub fn as_encoder(&self) -> Option<&EncoderNet> {
+        match self {
+            VpModel::Encoder(m) => Some(m),
+            VpModel::Hourglass(_) => None,
+        }
+    }
+
+    /// The architecture name stored in checkpoints ([`VpNetwork::KIND`]).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            VpModel::Hourglass(_) => StackedHourglass::KIND,
+            VpModel::Encoder(_) => EncoderNet::KIND,
+        }
+    }
+
+    /// Number of parameters (batch-norm running statistics included).
+    pub fn num_params(&self) -> usize {
+        match self {
+            VpModel::Hourglass(m) => m.num_params(),
+            VpModel::Encoder(m) => m.num_params(),
+        }
+    }
+
+    /// The final heatmaps, `[batch, outputs, heatmap, heatmap]`, of RGB `[0, 1]` input
+    /// `[batch, 3, input, input]`.
+    pub fn forward_last(&self, images: Tensor<4>) -> Tensor<4> {
+        match self {
+            VpModel::Hourglass(m) => m.forward_last(images),
+            VpModel::Encoder(m) => m.forward_last(images),
+        }
+    }
+
+    /// In validation mode on `device`.
+    fn valid_on(self, device: &Device) -> Self {
+        match self {
+            VpModel::Hourglass(m) => VpModel::from(m.valid().to_device(device)),
+            VpModel::Encoder(m) => VpModel::from(m.valid().to_device(device)),
+        }
+    }
+}
+
 /// A trained heatmap network ready for inference.
 #[derive(Debug)]
 pub struct VpNet {
-    model: StackedHourglass,
+    model: VpModel,
     config: ModelConfig,
     codec: HeatmapCodec,
     device: Device,
@@ -47,10 +120,11 @@ pub struct VpNet {
 }
 
 impl VpNet {
-    /// Wrap a model (moved to `device` and put in validation mode).
-    pub fn new(model: StackedHourglass, config: ModelConfig, device: &Device) -> VpNet {
+    /// Wrap a model ([`StackedHourglass`] or [`EncoderNet`]; moved to `device` and put in
+    /// validation mode).
+    pub fn new(model: impl Into<VpModel>, config: ModelConfig, device: &Device) -> VpNet {
         let device = device.clone().without_autodiff();
-        let model = model.valid().to_device(&device);
+        let model = model.into().valid_on(&device);
         VpNet {
             codec: config.codec(),
             model,
@@ -123,14 +197,15 @@ impl VpNet {
         config: ModelConfig,
         device: &Device,
     ) -> Result<VpNet, NetError> {
+        let expected = match config.encoder {
+            Encoder::Hourglass => StackedHourglass::KIND,
+            Encoder::YoloxNano => EncoderNet::KIND,
+        };
         if let Some(kind) = &file.kind {
-            if kind != StackedHourglass::KIND {
+            if kind != expected {
                 return Err(NetError::Weights {
                     path: file.path().to_path_buf(),
-                    message: format!(
-                        "weights of a {kind:?} network, not a {:?}",
-                        StackedHourglass::KIND
-                    ),
+                    message: format!("weights of a {kind:?} network, not a {expected:?}"),
                 });
             }
         }
@@ -139,7 +214,12 @@ impl VpNet {
             message: e.to_string(),
         })?;
         let device = device.clone().without_autodiff();
-        let model = file.load_into(StackedHourglass::new(&config, &device))?;
+        let model = match config.encoder {
+            Encoder::Hourglass => {
+                VpModel::from(file.load_into(StackedHourglass::new(&config, &device))?)
+            }
+            Encoder::YoloxNano => VpModel::from(file.load_into(EncoderNet::new(&config, &device))?),
+        };
         Ok(Self::new(model, config, &device))
     }
 
@@ -176,7 +256,7 @@ impl VpNet {
     }
 
     /// The model.
-    pub fn model(&self) -> &StackedHourglass {
+    pub fn model(&self) -> &VpModel {
         &self.model
     }
 

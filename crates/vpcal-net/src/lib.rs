@@ -5,6 +5,8 @@
 //! Entry points:
 //! - [`ModelConfig`] (presets [`ModelConfig::paper`], [`ModelConfig::small`],
 //!   [`ModelConfig::tiny`]) and [`StackedHourglass`], the network of DESIGN.md §5;
+//!   [`EncoderNet`] ([`ModelConfig::yolox_nano`]) puts the COCO-pretrained YOLOX-nano backbone
+//!   ([`encoder`]) in front of the same heatmap outputs;
 //!   [`regression`] holds the paper's regression baselines (ResNet-50, hourglass + pooling,
 //!   normalised L1/L2 losses).
 //! - [`Trainer`] with [`TrainConfig`] and [`LrSchedule`]: Adam, the paper's two-phase schedule,
@@ -30,6 +32,7 @@
 pub mod bench;
 pub mod config;
 pub mod device;
+pub mod encoder;
 mod fsutil;
 pub mod infer;
 pub mod metrics;
@@ -42,9 +45,10 @@ pub mod source;
 pub mod store;
 pub mod train;
 
-pub use config::{ChannelOrder, ModelConfig, Normalisation};
+pub use config::{ChannelOrder, Encoder, ModelConfig, Normalisation};
+pub use encoder::EncoderNet;
 pub use fsutil::write_atomic;
-pub use infer::{CropPrediction, VpNet};
+pub use infer::{CropPrediction, VpModel, VpNet};
 pub use model::StackedHourglass;
 pub use network::VpNetwork;
 pub use pipeline_source::PipelineSource;

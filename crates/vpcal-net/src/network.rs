@@ -1,5 +1,5 @@
 //! What the trainer needs from a network: the [`VpNetwork`] trait, implemented by the heatmap
-//! model ([`StackedHourglass`]) and the regression baselines
+//! models ([`StackedHourglass`], [`EncoderNet`]) and the regression baselines
 //! ([`Regressor`](crate::regression::Regressor)).
 
 use burn::module::Module;
@@ -10,7 +10,8 @@ use vpcal_data::Batch;
 use vpcal_geom::heatmap::{DecodeMode, HeatmapCodec};
 use vpcal_geom::Point2;
 
-use crate::config::ModelConfig;
+use crate::config::{Encoder, ModelConfig};
+use crate::encoder::{EncoderNet, YoloxNano};
 use crate::metrics::VpErrorAccumulator;
 use crate::model::StackedHourglass;
 use crate::NetError;
@@ -31,6 +32,32 @@ pub trait VpNetwork: Module + Clone + core::fmt::Debug + 'static {
 
     /// A freshly initialised network.
     fn init(config: &Self::Config, device: &Device) -> Self;
+
+    /// Load the pretrained parts of a freshly initialised network (a new training run from
+    /// scratch calls it after [`VpNetwork::init`]; loading a checkpoint does not need it). The
+    /// default has none and returns the network unchanged.
+    ///
+    /// # Errors
+    /// [`NetError::Weights`] when the pretrained weights do not fit.
+    fn load_pretrained(self, _config: &Self::Config) -> Result<Self, NetError> {
+        Ok(self)
+    }
+
+    /// Freeze (`true`) or unfreeze a pretrained encoder: frozen, no gradient reaches it and
+    /// the optimizer leaves it unchanged. The default (networks without one) accepts `false`
+    /// only.
+    ///
+    /// # Errors
+    /// [`NetError::Config`] when asked to freeze a network without a pretrained encoder.
+    fn freeze_encoder(self, frozen: bool) -> Result<Self, NetError> {
+        if frozen {
+            return Err(NetError::Config(format!(
+                "a {:?} network has no pretrained encoder to freeze",
+                Self::KIND
+            )));
+        }
+        Ok(self)
+    }
 
     /// Input crop side, pixels.
     fn input_size(config: &Self::Config) -> usize;
@@ -164,11 +191,92 @@ fn targets_tensor(batch: &Batch, device: &Device) -> Tensor<4> {
     )
 }
 
+/// `check_batch` of the heatmap networks: input size, heatmap resolution, channels, lengths.
+fn check_heatmap_batch(config: &ModelConfig, batch: &Batch) -> Result<(), NetError> {
+    let checks = [
+        ("input_size", batch.input_size, config.input_size),
+        ("heatmap_res", batch.heatmap_res, config.heatmap_size),
+        ("channels", batch.channels, config.outputs()),
+    ];
+    for (name, got, want) in checks {
+        if got != want {
+            return Err(NetError::Input(format!(
+                "batch {name} is {got}, the model expects {want}"
+            )));
+        }
+    }
+    let r = config.heatmap_size;
+    if batch.targets.len() != batch.size * config.outputs() * r * r
+        || batch.vp1_box.len() != batch.size
+        || batch.vp2_box.len() != batch.size
+    {
+        return Err(NetError::Input(format!(
+            "batch of {} crops holds {} target values, {} VP1s and {} VP2s (expected {}, {}, {})",
+            batch.size,
+            batch.targets.len(),
+            batch.vp1_box.len(),
+            batch.vp2_box.len(),
+            batch.size * config.outputs() * r * r,
+            batch.size,
+            batch.size
+        )));
+    }
+    Ok(())
+}
+
+/// `loss_terms` of the heatmap networks, given their outputs.
+fn heatmap_loss_terms(outs: Vec<Tensor<4>>, batch: &Batch, fg_weight: f64) -> Tensor<1> {
+    let Some(device) = outs.first().map(Tensor::device) else {
+        return Tensor::zeros([0], &Device::flex());
+    };
+    let targets = targets_tensor(batch, &device); // [b, k, r, r]
+    let labels = label_weights_tensor(batch, &device);
+    heatmap_losses(outs, targets, fg_weight, labels)
+}
+
+/// `evaluate` of the heatmap networks, given their outputs (the last one is decoded).
+fn heatmap_evaluate(
+    config: &ModelConfig,
+    outs: Vec<Tensor<4>>,
+    batch: &Batch,
+    acc: &mut VpErrorAccumulator,
+) -> Result<Vec<f32>, NetError> {
+    let Some(last) = outs.last().cloned() else {
+        return Ok(Vec::new());
+    };
+    let targets = targets_tensor(batch, &last.device());
+    let terms = to_vec(heatmap_losses(outs, targets, 0.0, None))?;
+    let heat = to_vec(last)?;
+    let codec = config.codec();
+    let per = codec.channels() * codec.resolution * codec.resolution;
+    for (i, chunk) in heat.chunks_exact(per).enumerate() {
+        let pred = codec.decode(chunk, DecodeMode::Centre);
+        acc.add(
+            &pred,
+            Point2::from(batch.vp1_box[i]),
+            Point2::from(batch.vp2_box[i]),
+        );
+    }
+    Ok(terms)
+}
+
+/// The config's encoder must be `want` for the network `kind`.
+fn require_encoder(config: &ModelConfig, want: Encoder, kind: &str) -> Result<(), NetError> {
+    if config.encoder != want {
+        return Err(NetError::Config(format!(
+            "encoder {:?} is not built by a {kind:?} network (expected {want:?})",
+            config.encoder
+        )));
+    }
+    Ok(())
+}
+
 impl VpNetwork for StackedHourglass {
     type Config = ModelConfig;
     const KIND: &'static str = "stacked_hourglass";
 
     fn validate_config(config: &ModelConfig) -> Result<(), NetError> {
+        require_encoder(config, Encoder::Hourglass, Self::KIND)?;
         config.validate()
     }
 
@@ -185,35 +293,7 @@ impl VpNetwork for StackedHourglass {
     }
 
     fn check_batch(config: &ModelConfig, batch: &Batch) -> Result<(), NetError> {
-        let checks = [
-            ("input_size", batch.input_size, config.input_size),
-            ("heatmap_res", batch.heatmap_res, config.heatmap_size),
-            ("channels", batch.channels, config.outputs()),
-        ];
-        for (name, got, want) in checks {
-            if got != want {
-                return Err(NetError::Input(format!(
-                    "batch {name} is {got}, the model expects {want}"
-                )));
-            }
-        }
-        let r = config.heatmap_size;
-        if batch.targets.len() != batch.size * config.outputs() * r * r
-            || batch.vp1_box.len() != batch.size
-            || batch.vp2_box.len() != batch.size
-        {
-            return Err(NetError::Input(format!(
-                "batch of {} crops holds {} target values, {} VP1s and {} VP2s (expected {}, {}, {})",
-                batch.size,
-                batch.targets.len(),
-                batch.vp1_box.len(),
-                batch.vp2_box.len(),
-                batch.size * config.outputs() * r * r,
-                batch.size,
-                batch.size
-            )));
-        }
-        Ok(())
+        check_heatmap_batch(config, batch)
     }
 
     fn loss_terms(
@@ -223,10 +303,7 @@ impl VpNetwork for StackedHourglass {
         batch: &Batch,
         fg_weight: f64,
     ) -> Tensor<1> {
-        let device = images.device();
-        let targets = targets_tensor(batch, &device); // [b, k, r, r]
-        let labels = label_weights_tensor(batch, &device);
-        heatmap_losses(self.forward(images), targets, fg_weight, labels)
+        heatmap_loss_terms(self.forward(images), batch, fg_weight)
     }
 
     fn evaluate(
@@ -236,25 +313,65 @@ impl VpNetwork for StackedHourglass {
         batch: &Batch,
         acc: &mut VpErrorAccumulator,
     ) -> Result<Vec<f32>, NetError> {
-        let device = images.device();
-        let targets = targets_tensor(batch, &device);
-        let outs = self.forward(images);
-        let last = outs.last().cloned();
-        let terms = to_vec(heatmap_losses(outs, targets, 0.0, None))?;
-        if let Some(last) = last {
-            let heat = to_vec(last)?;
-            let codec = config.codec();
-            let per = codec.channels() * codec.resolution * codec.resolution;
-            for (i, chunk) in heat.chunks_exact(per).enumerate() {
-                let pred = codec.decode(chunk, DecodeMode::Centre);
-                acc.add(
-                    &pred,
-                    Point2::from(batch.vp1_box[i]),
-                    Point2::from(batch.vp2_box[i]),
-                );
-            }
-        }
-        Ok(terms)
+        heatmap_evaluate(config, self.forward(images), batch, acc)
+    }
+}
+
+impl VpNetwork for EncoderNet {
+    type Config = ModelConfig;
+    const KIND: &'static str = "yolox_nano_fpn";
+
+    fn validate_config(config: &ModelConfig) -> Result<(), NetError> {
+        require_encoder(config, Encoder::YoloxNano, Self::KIND)?;
+        config.validate()
+    }
+
+    /// A random network; [`VpNetwork::load_pretrained`] loads the COCO encoder weights.
+    fn init(config: &ModelConfig, device: &Device) -> Self {
+        EncoderNet::new(config, device)
+    }
+
+    fn load_pretrained(self, _config: &ModelConfig) -> Result<Self, NetError> {
+        let device = self.devices().first().cloned().unwrap_or_else(Device::flex);
+        // Loaded on the plain device: moved to an autodiff device, its tensors become leaves.
+        let encoder = YoloxNano::pretrained(&device.clone().without_autodiff())?.to_device(&device);
+        Ok(self.with_encoder(encoder))
+    }
+
+    fn freeze_encoder(self, frozen: bool) -> Result<Self, NetError> {
+        Ok(self.with_frozen_encoder(frozen))
+    }
+
+    fn input_size(config: &ModelConfig) -> usize {
+        config.input_size
+    }
+
+    fn target_codec(config: &ModelConfig) -> HeatmapCodec {
+        config.codec()
+    }
+
+    fn check_batch(config: &ModelConfig, batch: &Batch) -> Result<(), NetError> {
+        check_heatmap_batch(config, batch)
+    }
+
+    fn loss_terms(
+        &self,
+        _config: &ModelConfig,
+        images: Tensor<4>,
+        batch: &Batch,
+        fg_weight: f64,
+    ) -> Tensor<1> {
+        heatmap_loss_terms(self.forward(images), batch, fg_weight)
+    }
+
+    fn evaluate(
+        &self,
+        config: &ModelConfig,
+        images: Tensor<4>,
+        batch: &Batch,
+        acc: &mut VpErrorAccumulator,
+    ) -> Result<Vec<f32>, NetError> {
+        heatmap_evaluate(config, self.forward(images), batch, acc)
     }
 }
 

@@ -164,6 +164,11 @@ pub struct TrainConfig<C> {
     /// default, is the paper's plain MSE). Validation loss is always the plain MSE.
     #[serde(default)]
     pub fg_weight: f64,
+    /// Keep a pretrained encoder fixed ([`VpNetwork::freeze_encoder`]): the first phase of
+    /// fine-tuning a pretrained-encoder network, training only its decoder. Absent (false) in
+    /// older runs.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub freeze_encoder: bool,
 }
 
 impl<C> TrainConfig<C> {
@@ -182,6 +187,7 @@ impl<C> TrainConfig<C> {
             data_history: Vec::new(),
             keep_checkpoints: 2,
             fg_weight: 0.0,
+            freeze_encoder: false,
         }
     }
 }
@@ -260,7 +266,8 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), NetError> {
 }
 
 impl<N: VpNetwork> Trainer<N> {
-    /// A new run in `out` with a freshly initialised model (seeded by `config.seed`).
+    /// A new run in `out` with a freshly initialised model (seeded by `config.seed`), its
+    /// pretrained parts loaded ([`VpNetwork::load_pretrained`]).
     ///
     /// # Errors
     /// [`NetError::Config`] for an invalid config; [`NetError::Checkpoint`] when `out` already
@@ -273,7 +280,7 @@ impl<N: VpNetwork> Trainer<N> {
         N::validate_config(&config.model)?;
         let device = device.clone().autodiff();
         device.seed(config.seed);
-        let model = N::init(&config.model, &device);
+        let model = N::init(&config.model, &device).load_pretrained(&config.model)?;
         Self::with_model(config, out, &device, model)
     }
 
@@ -334,7 +341,10 @@ impl<N: VpNetwork> Trainer<N> {
         std::fs::create_dir_all(out.join("checkpoints"))
             .map_err(|e| NetError::io(&out.join("checkpoints"), e))?;
         let device = device.clone().autodiff();
-        let model = model.to_device(&device).train();
+        let model = model
+            .to_device(&device)
+            .train()
+            .freeze_encoder(config.freeze_encoder)?;
         write_json(&out.join(TRAIN_CONFIG), &config)?;
         Ok(Trainer {
             optim: adam(&config.adam),
@@ -390,7 +400,10 @@ impl<N: VpNetwork> Trainer<N> {
                 });
             }
         }
-        let model = weights.load_into(N::init(&config.model, &device))?.train();
+        let model = weights
+            .load_into(N::init(&config.model, &device))?
+            .train()
+            .freeze_encoder(config.freeze_encoder)?;
         let opt_path = dir.join(OPTIMIZER);
         let opt_bytes = std::fs::read(&opt_path).map_err(|e| NetError::io(&opt_path, e))?;
         let optim = adam(&config.adam)

@@ -142,7 +142,7 @@ fn checkpoint_round_trip_is_bit_identical() {
 
     // Through inference loading from the run folder.
     let net = VpNet::load(dir.path(), &device).unwrap();
-    assert_eq!(bits(net.model()), trained);
+    assert_eq!(bits(net.model().as_hourglass().unwrap()), trained);
     assert_eq!(net.config(), &config);
 
     // A new run refuses a folder that already holds one.

@@ -2,5 +2,6 @@
 //! dependencies) with a module per area.
 
 mod checkpoints;
+mod encoder;
 mod inference;
 mod training;

@@ -243,3 +243,79 @@ fn synth_crops_take_the_camera_heights_and_pitches_they_are_given() {
     );
     assert!(!dir.path().join("bad/samples.jsonl").exists());
 }
+
+#[test]
+fn encoder_network_trains_frozen_resumes_and_predicts() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("yolox");
+    let run_s = run.to_str().unwrap();
+    let o = vpcal(&[
+        "train",
+        "--data",
+        "toy:8",
+        "--preset",
+        "yolox_nano",
+        "--freeze-encoder",
+        "--batch",
+        "8",
+        "--epochs",
+        "1",
+        "--max-val-batches",
+        "1",
+        "--out",
+        run_s,
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("yolox_nano_fpn"), "{}", text(&o));
+    let saved = read_json(&run.join("train_config.json"));
+    assert_eq!(saved["kind"], "yolox_nano_fpn", "{saved}");
+    assert_eq!(saved["freeze_encoder"], true, "{saved}");
+    assert_eq!(saved["model"]["encoder"], "yolox_nano", "{saved}");
+    // Resuming needs no --preset: the run says which network it trains.
+    let o = vpcal(&[
+        "train", "--resume", "--out", run_s, "--epochs", "2", "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("epoch 2/2"), "{}", text(&o));
+    // The hourglass has no encoder to freeze.
+    let o = vpcal(&[
+        "train",
+        "--data",
+        "toy:8",
+        "--preset",
+        "tiny",
+        "--freeze-encoder",
+        "--out",
+        dir.path().join("hg").to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(
+        !o.status.success() && text(&o).contains("no pretrained encoder"),
+        "{}",
+        text(&o)
+    );
+    // Inference loads the encoder network from the run folder.
+    let crop = image::RgbImage::from_fn(60, 40, |x, y| {
+        image::Rgb([(x * 4) as u8, (y * 6) as u8, 90])
+    });
+    let crop_path = dir.path().join("car.png");
+    crop.save(&crop_path).unwrap();
+    let o = vpcal(&[
+        "predict",
+        crop_path.to_str().unwrap(),
+        "--weights",
+        run_s,
+        "--out",
+        dir.path().join("pred").to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let line = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .last()
+        .unwrap()
+        .to_string();
+    let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(v["spreads"].as_array().unwrap().len(), 4, "{v}");
+}

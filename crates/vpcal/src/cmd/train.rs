@@ -12,8 +12,8 @@ use vpcal_geom::heatmap::HeatmapCodec;
 use vpcal_net::regression::{NormLoss, RegressionConfig, Regressor};
 use vpcal_net::train::EpochRecord;
 use vpcal_net::{
-    BatchSource, LrSchedule, ModelConfig, PipelineSource, StackedHourglass, ToySource, TrainConfig,
-    Trainer, VpNetwork,
+    BatchSource, Encoder, EncoderNet, LrSchedule, ModelConfig, PipelineSource, StackedHourglass,
+    ToySource, TrainConfig, Trainer, VpNetwork,
 };
 
 /// The augmentation of a new run without `--augment`: the paper's.
@@ -63,10 +63,18 @@ pub struct Args {
     #[arg(long)]
     pub resume: bool,
     /// Model size: `paper` (the paper's stacked hourglass: 2 stacks, 128 px crops, 64 px
-    /// heatmaps, 4 scales; a GPU is advised), `small` (the bundled model's size) or `tiny`
-    /// (CPU training and tests).
+    /// heatmaps, 4 scales; a GPU is advised), `small` (the bundled model's size), `tiny`
+    /// (CPU training and tests) or `yolox_nano` (the COCO-pretrained YOLOX-nano backbone with
+    /// an FPN-lite decoder: 128 px crops, 32 px heatmaps; see --freeze-encoder).
     #[arg(long, default_value = "paper")]
     pub preset: String,
+    /// Keep the pretrained encoder of `--preset yolox_nano` fixed and train only its decoder
+    /// (the first phase, e.g. --lr 1e-3). Fine-tune the whole network afterwards in a new run
+    /// with `--init RUN/checkpoints/epoch-N/model.safetensors` without this flag and a low rate
+    /// (--lr 1e-4 or less), so the pretrained features are not destroyed. A resumed run keeps
+    /// its setting.
+    #[arg(long)]
+    pub freeze_encoder: bool,
     /// Network architecture.
     #[arg(long, value_enum, default_value_t = Arch::Heatmap)]
     pub arch: Arch,
@@ -322,6 +330,13 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
                 t.config().fg_weight
             );
         }
+        if a.freeze_encoder && !t.config().freeze_encoder {
+            bail!(
+                "--freeze-encoder: the run in {} trains its whole network; start a new run to \
+                 freeze the encoder",
+                a.out.display()
+            );
+        }
         if let Some(e) = a.epochs {
             let base = t.config().schedule.lr_at(0);
             t.set_schedule(schedule(a, e, base))?;
@@ -386,6 +401,7 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
             bail!("--fg-weight {fg_weight}: expected a finite weight >= 0");
         }
         tc.fg_weight = fg_weight;
+        tc.freeze_encoder = a.freeze_encoder;
         let t = match &init {
             Some(w) => Trainer::<N>::from_weights(tc, &a.out, &device, w),
             None => Trainer::<N>::new(tc, &a.out, &device),
@@ -404,6 +420,18 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
         a.out.display()
     );
     train_loop(trainer, source.as_ref())
+}
+
+/// Whether the run in `out` trains the pretrained-encoder network (its `train_config.json`
+/// names [`EncoderNet::KIND`]); a missing file is left to the resume itself to report.
+fn resumed_run_is_encoder(out: &Path) -> Result<bool> {
+    let path = out.join("train_config.json");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(false);
+    };
+    let value: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: malformed JSON", path.display()))?;
+    Ok(value.get("kind").and_then(|k| k.as_str()) == Some(EncoderNet::KIND))
 }
 
 /// Run `vpcal train`.
@@ -426,7 +454,17 @@ pub fn run(a: Args) -> Result<()> {
                     })?,
                 None => ModelConfig::preset(&a.preset)?,
             };
-            run_arch::<StackedHourglass>(&a, model)
+            // A resumed run trains the network it was started with, whatever --preset says.
+            let encoder = if a.resume {
+                resumed_run_is_encoder(&a.out)?
+            } else {
+                model.encoder == Encoder::YoloxNano
+            };
+            if encoder {
+                run_arch::<EncoderNet>(&a, model)
+            } else {
+                run_arch::<StackedHourglass>(&a, model)
+            }
         }
         Arch::Resnet50 | Arch::HourglassPool if a.init.is_some() => {
             bail!("--init: fine-tuning is for the heatmap network (--arch heatmap) only")
