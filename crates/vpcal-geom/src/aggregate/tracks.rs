@@ -67,8 +67,9 @@ pub struct TrackLine {
     /// The change of the parabola's direction from the first to the last centre, degrees
     /// (signed like `bend_t`): how much the vehicle turned, whether or not significantly.
     pub bend_deg: f64,
-    /// The standard error of `bend_deg` (from the scatter of the centres around the
-    /// parabola): how well this track can tell a turn from a straight drive.
+    /// The standard error of `bend_deg` (from the scatter of the centres around a cubic, and
+    /// that scatter's correlation from one box to the next): how well this track can tell a
+    /// turn from a straight drive.
     pub bend_se_deg: f64,
     /// The parabola's second derivative across `dir`, 1/px (signed like `bend_t`; its
     /// standard error is `curvature / bend_t`): comparable between tracks of any length.
@@ -273,16 +274,15 @@ fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
     let coef: Vec<f64> = (0..3)
         .map(|i| (0..3).map(|j| inv[i][j] * atb[j]).sum())
         .collect();
-    let residuals: Vec<f64> = uv
-        .iter()
-        .map(|&(u, v)| {
-            let u = u / scale;
-            v - coef[0] - coef[1] * u - coef[2] * u * u
-        })
-        .collect();
+    // The boxes' noise, and how it is correlated in time, from the residuals of a cubic: a
+    // smooth path that is no parabola (a curve in perspective, exact boxes) is not noise.
+    let scaled: Vec<(f64, f64)> = uv.iter().map(|&(u, v)| (u / scale, v)).collect();
+    let Some(residuals) = cubic_residuals(&scaled) else {
+        return (0.0, 0.0, f64::INFINITY, 0.0);
+    };
     let sse: f64 = residuals.iter().map(|r| r * r).sum();
     // A floor on the noise (0.05 px) keeps exact synthetic centres finite.
-    let sigma2 = (sse / (n - 3) as f64).max(0.05 * 0.05);
+    let sigma2 = (sse / (n - 4).max(1) as f64).max(0.05 * 0.05);
     let se = (sigma2 * inv[2][2]).sqrt() * autocorrelation_inflation(&residuals);
     if !(se > 0.0 && se.is_finite()) {
         return (0.0, 0.0, f64::INFINITY, 0.0);
@@ -305,6 +305,48 @@ fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
     )
 }
 
+/// The residuals of the least-squares cubic `v = a + b u + c u² + d u³` through `(u, v)`
+/// (u scaled to about [-1, 1]), in the points' order; `None` when the fit is singular.
+fn cubic_residuals(points: &[(f64, f64)]) -> Option<Vec<f64>> {
+    // Normal equations, solved by Gaussian elimination with partial pivoting.
+    let mut m = [[0.0f64; 5]; 4];
+    for &(u, v) in points {
+        let row = [1.0, u, u * u, u * u * u];
+        for i in 0..4 {
+            for j in 0..4 {
+                m[i][j] += row[i] * row[j];
+            }
+            m[i][4] += row[i] * v;
+        }
+    }
+    let norm = m
+        .iter()
+        .flat_map(|r| &r[..4])
+        .fold(0.0f64, |a, v| a.max(v.abs()));
+    for col in 0..4 {
+        let pivot = (col..4).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
+        if !(m[pivot][col].abs() > 1e-12 * norm) {
+            return None;
+        }
+        m.swap(col, pivot);
+        for r in 0..4 {
+            if r != col {
+                let f = m[r][col] / m[col][col];
+                for c in col..5 {
+                    m[r][c] -= f * m[col][c];
+                }
+            }
+        }
+    }
+    let coef: Vec<f64> = (0..4).map(|i| m[i][4] / m[i][i]).collect();
+    Some(
+        points
+            .iter()
+            .map(|&(u, v)| v - coef[0] - u * (coef[1] + u * (coef[2] + u * coef[3])))
+            .collect(),
+    )
+}
+
 /// How much wider a least-squares standard error is when the residuals, in time order,
 /// are correlated from one box to the next: `sqrt((1 + rho) / (1 - rho))` with `rho` their
 /// lag-1 autocorrelation (an AR(1) process' variance inflation of a mean), 1 for `rho <= 0`,
@@ -312,7 +354,7 @@ fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
 ///
 /// A detector's box does not jitter independently from frame to frame: it stays too wide or
 /// shifted for many frames (a shadow, a partial occlusion, a box that grows in steps). On
-/// real corpus clips the parabola's residuals had lag-1 autocorrelations of 0.6-0.95, so
+/// real corpus clips a parabola's residuals had lag-1 autocorrelations of 0.6-0.95, so
 /// the white-noise error understated the bend's error by 2-6 times and wobbly tracks on
 /// straight roads read as significantly bent.
 fn autocorrelation_inflation(residuals: &[f64]) -> f64 {
