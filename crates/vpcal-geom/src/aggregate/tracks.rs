@@ -325,15 +325,17 @@ fn cubic_residuals(points: &[(f64, f64)]) -> Option<Vec<f64>> {
         .fold(0.0f64, |a, v| a.max(v.abs()));
     for col in 0..4 {
         let pivot = (col..4).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
-        if !(m[pivot][col].abs() > 1e-12 * norm) {
+        // NaN fails the comparison too.
+        if m[pivot][col].abs().partial_cmp(&(1e-12 * norm)) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
         m.swap(col, pivot);
-        for r in 0..4 {
+        let pivot_row = m[col];
+        for (r, row) in m.iter_mut().enumerate() {
             if r != col {
-                let f = m[r][col] / m[col][col];
-                for c in col..5 {
-                    m[r][c] -= f * m[col][c];
+                let f = row[col] / pivot_row[col];
+                for (v, p) in row.iter_mut().zip(pivot_row).skip(col) {
+                    *v -= f * p;
                 }
             }
         }
