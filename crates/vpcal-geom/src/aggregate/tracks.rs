@@ -67,9 +67,9 @@ pub struct TrackLine {
     /// The change of the parabola's direction from the first to the last centre, degrees
     /// (signed like `bend_t`): how much the vehicle turned, whether or not significantly.
     pub bend_deg: f64,
-    /// The standard error of `bend_deg` (from the scatter of the centres around a cubic, and
-    /// that scatter's correlation from one box to the next): how well this track can tell a
-    /// turn from a straight drive.
+    /// The standard error of `bend_deg` (from the scatter of the centres around the
+    /// parabola, and the correlation from one box to the next of their scatter around a
+    /// cubic): how well this track can tell a turn from a straight drive.
     pub bend_se_deg: f64,
     /// The parabola's second derivative across `dir`, 1/px (signed like `bend_t`; its
     /// standard error is `curvature / bend_t`): comparable between tracks of any length.
@@ -274,16 +274,20 @@ fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
     let coef: Vec<f64> = (0..3)
         .map(|i| (0..3).map(|j| inv[i][j] * atb[j]).sum())
         .collect();
-    // The boxes' noise, and how it is correlated in time, from the residuals of a cubic: a
-    // smooth path that is no parabola (a curve in perspective, exact boxes) is not noise.
-    let scaled: Vec<(f64, f64)> = uv.iter().map(|&(u, v)| (u / scale, v)).collect();
-    let Some(residuals) = cubic_residuals(&scaled) else {
-        return (0.0, 0.0, f64::INFINITY, 0.0);
-    };
-    let sse: f64 = residuals.iter().map(|r| r * r).sum();
+    let sse: f64 = uv
+        .iter()
+        .map(|&(u, v)| {
+            let u = u / scale;
+            (v - coef[0] - coef[1] * u - coef[2] * u * u).powi(2)
+        })
+        .sum();
     // A floor on the noise (0.05 px) keeps exact synthetic centres finite.
-    let sigma2 = (sse / (n - 4).max(1) as f64).max(0.05 * 0.05);
-    let se = (sigma2 * inv[2][2]).sqrt() * autocorrelation_inflation(&residuals);
+    let sigma2 = (sse / (n - 3) as f64).max(0.05 * 0.05);
+    // How the noise is correlated in time, from the residuals of a cubic: a smooth path that
+    // is no parabola (a curve in perspective, exact boxes) is not correlated noise.
+    let scaled: Vec<(f64, f64)> = uv.iter().map(|&(u, v)| (u / scale, v)).collect();
+    let inflation = cubic_residuals(&scaled).map_or(1.0, |r| autocorrelation_inflation(&r));
+    let se = (sigma2 * inv[2][2]).sqrt() * inflation;
     if !(se > 0.0 && se.is_finite()) {
         return (0.0, 0.0, f64::INFINITY, 0.0);
     }
