@@ -186,34 +186,6 @@ fn a_track_on_a_curve_bends_significantly_and_a_noisy_straight_one_does_not() {
 }
 
 #[test]
-fn a_straight_track_whose_box_sticks_off_centre_for_frames_at_a_time_is_not_bent() {
-    // A detector's box stays shifted for several frames (a shadow, a partial occlusion): the
-    // offsets across the track are held for 5 frames each, so the residuals of the parabola
-    // are strongly correlated in time. Counted as 60 independent centres, the quadratic term
-    // has |t| of about 6.5; with the AR(1) inflation it is well below the curve test's 4.
-    let opts = TrackOptions::default();
-    let track: Vec<usize> = (0..60).collect();
-    let offsets = [
-        0.0, 2.0, 3.0, 1.0, -1.0, -2.0, -3.0, -2.0, 0.0, 1.0, 3.0, 2.0,
-    ];
-    let (start, end) = (Point2::new(400.0, 900.0), Point2::new(900.0, -100.0));
-    let dir = (end - start) / (end - start).norm();
-    let across = Point2::new(dir.y, -dir.x);
-    let boxes: Vec<(f64, BoxPx)> = (0..60)
-        .map(|k| {
-            let c = start + (end - start) * (k as f64 / 100.0) + across * offsets[(k / 5) % 12];
-            (k as f64, box_at(c, 40.0))
-        })
-        .collect();
-    let line = fit_line(&boxes, &track, &opts).unwrap();
-    assert!(line.bend_t.abs() < 2.5, "{line:?}");
-    assert!(
-        line.bend_t.abs() > 0.5,
-        "the offsets do bend the parabola a little: {line:?}"
-    );
-}
-
-#[test]
 fn a_tangent_knows_its_error_from_the_boxes_jitter() {
     // One car, 30 boxes 10 px apart along x; exact centres, then centres jittering 2 px up and
     // down. The window (4 boxes either side: 9 centres, RMS spread 25.8 px along the axis)

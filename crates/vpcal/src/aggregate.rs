@@ -600,7 +600,6 @@ pub fn aggregate(
                 "track_residual_deg": e.track_residual_deg,
                 "curved_tracks": e.curved_tracks,
                 "road_curved": e.road_curved,
-                "lens_distortion": e.lens_distortion,
                 "curved_fit": e.curved_fit,
                 "curved_focal": e.curved_focal,
                 "curved_vehicles": e.curved_vehicles,

@@ -188,9 +188,7 @@ pub struct RobustOptions {
     /// ([`TrackLine::bend_deg`]): on a curve every car has its own heading, so lines fitted to
     /// whole tracks miss VP1 and the horizon (`evidence.curved_tracks`). Exact boxes of cars
     /// on a straight road bend a little too (a box's centre is not a fixed point of the car),
-    /// significantly but by less than a degree or two on the synthetic suite. The tracks are
-    /// counted after the lens distortion that straightens the most of them
-    /// ([`Evidence::lens_distortion`]).
+    /// significantly but by less than a degree or two on the synthetic suite.
     pub curved_bend_t: f64,
     pub curved_bend_deg: f64,
     pub curved_share: f64,
@@ -298,11 +296,6 @@ pub struct Evidence {
     /// whether they made the road count as curved, so that VP1 did not come from the tracks.
     pub curved_tracks: usize,
     pub road_curved: bool,
-    /// The lens's radial distortion (corner displacement over half-diagonal, within
-    /// ±[`MAX_LENS_DISTORTION`]) that leaves the fewest tracks bent; `curved_tracks` counts
-    /// the tracks that stay bent under it ([`bent_whatever_the_lens`]).
-    #[serde(default)]
-    pub lens_distortion: f64,
     /// Whether the horizon and focal length came from the curved-road fit
     /// ([`edge::fit_curved`]: each car's own VP1 from its track's tangent), and on how many
     /// vehicles.
@@ -1320,79 +1313,16 @@ fn locate_vp1_from_network(
     Some(p1)
 }
 
-/// The strongest radial lens distortion [`bent_whatever_the_lens`] allows for: the
-/// displacement of the image corner as a share of the half-diagonal. Rectilinear wide-angle
-/// CCTV lenses show barrel distortion of up to about a fifth of the corner's radius; more is
-/// a fisheye's, which this tool does not model.
-pub const MAX_LENS_DISTORTION: f64 = 0.25;
-
-/// How many track lines bend significantly the same way ([`bending_the_same_way`]) whatever
-/// the lens's radial distortion, within ±[`MAX_LENS_DISTORTION`]: the smallest count over
-/// distortions `k` on a grid, with the distortion `k` that gives it.
-///
-/// Radial distortion `k` (the corner's displacement over the half-diagonal `R`) bows a
-/// straight line at distance `d` from the principal point by a curvature of `2 k d / R²`
-/// across it: lines on opposite sides of the centre bend opposite ways, by more the farther
-/// out they lie. A curved road bends every track the same way wherever it lies. Each line's
-/// curvature (`TrackLine::curvature`, its standard error from `bend_t`) is corrected for the
-/// distortion before its bend is tested. A wide CCTV lens bent the straight tracks of a
-/// corpus clip (`cn_urban_arterial_cctv_2016`, every track left of the centre) alike by
-/// 5-10°: a barrel distortion of about 0.2 straightens them, while the suite's curves and the
-/// corpus's curved roads keep most of their bent tracks under any distortion allowed.
-fn bent_whatever_the_lens(
-    lines: &[TrackLine],
-    pp: Point2,
-    half_diagonal: f64,
-    min_t: f64,
-    min_deg: f64,
-) -> (usize, f64) {
-    const STEPS: usize = 40;
-    let reference = common_orientation(lines);
-    let corrected = |k: f64| -> Vec<TrackLine> {
-        lines
-            .iter()
-            .map(|t| {
-                let across = Point2::new(t.dir.y, -t.dir.x);
-                let lens = 2.0 * k * (t.point - pp).dot(across) / (half_diagonal * half_diagonal);
-                let share = if t.curvature != 0.0 {
-                    (t.curvature - lens) / t.curvature
-                } else {
-                    0.0
-                };
-                TrackLine {
-                    bend_t: t.bend_t * share,
-                    bend_deg: t.bend_deg * share,
-                    ..*t
-                }
-            })
-            .collect()
-    };
-    let mut best = (bending_the_same_way(lines, reference, min_t, min_deg), 0.0);
-    for i in 0..=STEPS {
-        let k = MAX_LENS_DISTORTION * (2.0 * i as f64 / STEPS as f64 - 1.0);
-        let count = bending_the_same_way(&corrected(k), reference, min_t, min_deg);
-        if count < best.0 {
-            best = (count, k);
-        }
-    }
-    best
-}
-
-/// The lines' common direction (the doubled-angle mean of their directions), to orient each
-/// line alike before comparing the sides they bend to.
-fn common_orientation(lines: &[TrackLine]) -> Point2 {
+/// How many of the track lines bend with `|bend_t| > min_t` and `|bend_deg| > min_deg`
+/// towards the same side (the larger count of the two sides), the lines' directions first
+/// oriented alike (doubled-angle mean).
+fn bending_the_same_way(lines: &[TrackLine], min_t: f64, min_deg: f64) -> usize {
     let (c, s) = lines.iter().fold((0.0, 0.0), |(c, s), t| {
         let a = 2.0 * t.dir.y.atan2(t.dir.x);
         (c + a.cos(), s + a.sin())
     });
     let mean = 0.5 * f64::atan2(s, c);
-    Point2::new(mean.cos(), mean.sin())
-}
-
-/// How many of the track lines bend with `|bend_t| > min_t` and `|bend_deg| > min_deg`
-/// towards the same side (the larger count of the two sides), the lines' directions first
-/// oriented alike (along `reference`, [`common_orientation`]).
-fn bending_the_same_way(lines: &[TrackLine], reference: Point2, min_t: f64, min_deg: f64) -> usize {
+    let reference = Point2::new(mean.cos(), mean.sin());
     let (mut left, mut right) = (0, 0);
     for t in lines {
         let sign = if t.dir.dot(reference) >= 0.0 {
@@ -1556,13 +1486,7 @@ pub fn aggregate_with_scene(
         .filter(|l| l.bend_se_deg < opts.curved_max_se_deg)
         .copied()
         .collect();
-    let (curved_tracks, lens_distortion) = bent_whatever_the_lens(
-        &telling,
-        pp,
-        0.5 * width.hypot(height),
-        opts.curved_bend_t,
-        opts.curved_bend_deg,
-    );
+    let curved_tracks = bending_the_same_way(&telling, opts.curved_bend_t, opts.curved_bend_deg);
     let road_curved = curved_tracks >= opts.min_curved_tracks.max(1)
         && curved_tracks as f64 >= opts.curved_share * telling.len() as f64;
     let use_tracks = match (&tracked, network_scatter) {
@@ -1795,7 +1719,6 @@ pub fn aggregate_with_scene(
         track_residual_deg: track_residual,
         curved_tracks,
         road_curved,
-        lens_distortion,
         curved_fit: curved_fit.is_some(),
         curved_focal,
         curved_vehicles: curved_fit.map_or(0, |c| c.vehicles),
@@ -1912,59 +1835,4 @@ pub fn aggregate_with_scene(
         confidence: confidence.flatten(),
         track_lines,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A vertical track line through `x` bending by `curvature` (1/px) over 900 px, known to
-    /// 2 % of its curvature.
-    fn line(x: f64, curvature: f64) -> TrackLine {
-        let travel = 900.0;
-        TrackLine {
-            point: Point2::new(x, 500.0),
-            dir: Point2::new(0.0, -1.0),
-            boxes: 40,
-            travel,
-            rms: 1.0,
-            bend_t: 50.0 * curvature.signum(),
-            bend_deg: (curvature * travel).to_degrees(),
-            bend_se_deg: 0.2,
-            curvature,
-        }
-    }
-
-    #[test]
-    fn a_lens_bends_tracks_apart_and_a_curve_bends_them_alike() {
-        let (pp, r) = (Point2::new(960.0, 540.0), 0.5 * 1920f64.hypot(1080.0));
-        let lens = |k: f64, x: f64| {
-            2.0 * k * (Point2::new(x, 500.0) - pp).dot(Point2::new(-1.0, 0.0)) / (r * r)
-        };
-        // Straight tracks left of the centre, bowed by a barrel distortion of 0.15: they bend
-        // alike, but a lens explains them.
-        let left: Vec<TrackLine> = [200.0, 350.0, 500.0, 650.0]
-            .iter()
-            .map(|&x| line(x, lens(0.15, x)))
-            .collect();
-        assert_eq!(
-            bending_the_same_way(&left, common_orientation(&left), 4.0, 3.0),
-            4
-        );
-        let (bent, k) = bent_whatever_the_lens(&left, pp, r, 4.0, 3.0);
-        assert_eq!(bent, 0);
-        assert!((k - 0.15).abs() < 0.05, "{k}");
-        // Beyond any lens allowed (a distortion of 0.6), they stay bent.
-        let far: Vec<TrackLine> = [200.0, 350.0, 500.0, 650.0]
-            .iter()
-            .map(|&x| line(x, lens(0.6, x)))
-            .collect();
-        assert_eq!(bent_whatever_the_lens(&far, pp, r, 4.0, 3.0).0, 4);
-        // A curve bends tracks on both sides of the centre the same way: no lens undoes it.
-        let curve: Vec<TrackLine> = [300.0, 700.0, 1200.0, 1600.0]
-            .iter()
-            .map(|&x| line(x, 5e-4))
-            .collect();
-        assert_eq!(bent_whatever_the_lens(&curve, pp, r, 4.0, 3.0).0, 4);
-    }
 }

@@ -68,12 +68,8 @@ pub struct TrackLine {
     /// (signed like `bend_t`): how much the vehicle turned, whether or not significantly.
     pub bend_deg: f64,
     /// The standard error of `bend_deg` (from the scatter of the centres around the
-    /// parabola, and the correlation from one box to the next of their scatter around a
-    /// cubic): how well this track can tell a turn from a straight drive.
+    /// parabola): how well this track can tell a turn from a straight drive.
     pub bend_se_deg: f64,
-    /// The parabola's second derivative across `dir`, 1/px (signed like `bend_t`; its
-    /// standard error is `curvature / bend_t`): comparable between tracks of any length.
-    pub curvature: f64,
 }
 
 /// Join boxes into tracks. `boxes[i]` is `(frame, box)`; returns, per track, the indices of
@@ -218,7 +214,7 @@ pub fn fit_line(boxes: &[(f64, BoxPx)], track: &[usize], opts: &TrackOptions) ->
         .collect();
     sizes.sort_by(f64::total_cmp);
     let size = sizes[n / 2];
-    let (bend_t, bend_deg, bend_se_deg, curvature) = bend(&centres, mean, dir);
+    let (bend_t, bend_deg, bend_se_deg) = bend(&centres, mean, dir);
     let ok = travel.is_finite()
         && travel > 0.0
         && travel >= opts.min_travel_boxes * size
@@ -232,19 +228,18 @@ pub fn fit_line(boxes: &[(f64, BoxPx)], track: &[usize], opts: &TrackOptions) ->
         bend_t,
         bend_deg,
         bend_se_deg,
-        curvature,
     })
 }
 
 /// The t-statistic of `c` in `v = a + b u + c u^2`, least squares over the centres, where `u`
 /// runs along `dir` and `v` across it (towards `(dir.y, -dir.x)`) from `mean`, and the change
-/// of the parabola's direction between the extreme centres and its standard error, degrees,
-/// and the parabola's curvature `d²v/du²`, 1/px. (0, 0, inf, 0) with fewer than 5 centres or
-/// a degenerate fit; the t is large when the noise is nil.
-fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
+/// of the parabola's direction between the extreme centres and its standard error, degrees.
+/// (0, 0, inf) with fewer than 5 centres or a degenerate fit; the t is large when the noise is
+/// nil.
+fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64) {
     let n = centres.len();
     if n < 5 {
-        return (0.0, 0.0, f64::INFINITY, 0.0);
+        return (0.0, 0.0, f64::INFINITY);
     }
     let across = Point2::new(dir.y, -dir.x);
     // Normal equations of the 3-parameter fit, with u scaled to about [-1, 1].
@@ -254,7 +249,7 @@ fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
         .collect();
     let scale = uv.iter().fold(0.0f64, |m, (u, _)| m.max(u.abs()));
     if scale.is_nan() || scale <= 0.0 {
-        return (0.0, 0.0, f64::INFINITY, 0.0);
+        return (0.0, 0.0, f64::INFINITY);
     }
     let mut ata = [[0.0f64; 3]; 3];
     let mut atb = [0.0f64; 3];
@@ -269,7 +264,7 @@ fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
         }
     }
     let Some(inv) = invert3(&ata) else {
-        return (0.0, 0.0, f64::INFINITY, 0.0);
+        return (0.0, 0.0, f64::INFINITY);
     };
     let coef: Vec<f64> = (0..3)
         .map(|i| (0..3).map(|j| inv[i][j] * atb[j]).sum())
@@ -283,13 +278,9 @@ fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
         .sum();
     // A floor on the noise (0.05 px) keeps exact synthetic centres finite.
     let sigma2 = (sse / (n - 3) as f64).max(0.05 * 0.05);
-    // How the noise is correlated in time, from the residuals of a cubic: a smooth path that
-    // is no parabola (a curve in perspective, exact boxes) is not correlated noise.
-    let scaled: Vec<(f64, f64)> = uv.iter().map(|&(u, v)| (u / scale, v)).collect();
-    let inflation = cubic_residuals(&scaled).map_or(1.0, |r| autocorrelation_inflation(&r));
-    let se = (sigma2 * inv[2][2]).sqrt() * inflation;
+    let se = (sigma2 * inv[2][2]).sqrt();
     if !(se > 0.0 && se.is_finite()) {
-        return (0.0, 0.0, f64::INFINITY, 0.0);
+        return (0.0, 0.0, f64::INFINITY);
     }
     // dv/du = 2 c u / scale^2 (u unscaled) at the two ends.
     let (lo, hi) = uv
@@ -301,81 +292,8 @@ fn bend(centres: &[Point2], mean: Point2, dir: Point2) -> (f64, f64, f64, f64) {
     let turned = (slope(hi).atan() - slope(lo).atan()).to_degrees();
     // Small angles: the turn is about 2 c (hi - lo) / scale^2 radians.
     let turned_se = (2.0 * se * (hi - lo) / (scale * scale)).to_degrees();
-    (
-        coef[2] / se,
-        turned,
-        turned_se,
-        2.0 * coef[2] / (scale * scale),
-    )
+    (coef[2] / se, turned, turned_se)
 }
-
-/// The residuals of the least-squares cubic `v = a + b u + c u² + d u³` through `(u, v)`
-/// (u scaled to about [-1, 1]), in the points' order; `None` when the fit is singular.
-fn cubic_residuals(points: &[(f64, f64)]) -> Option<Vec<f64>> {
-    // Normal equations, solved by Gaussian elimination with partial pivoting.
-    let mut m = [[0.0f64; 5]; 4];
-    for &(u, v) in points {
-        let row = [1.0, u, u * u, u * u * u];
-        for i in 0..4 {
-            for j in 0..4 {
-                m[i][j] += row[i] * row[j];
-            }
-            m[i][4] += row[i] * v;
-        }
-    }
-    let norm = m
-        .iter()
-        .flat_map(|r| &r[..4])
-        .fold(0.0f64, |a, v| a.max(v.abs()));
-    for col in 0..4 {
-        let pivot = (col..4).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
-        // NaN fails the comparison too.
-        if m[pivot][col].abs().partial_cmp(&(1e-12 * norm)) != Some(std::cmp::Ordering::Greater) {
-            return None;
-        }
-        m.swap(col, pivot);
-        let pivot_row = m[col];
-        for (r, row) in m.iter_mut().enumerate() {
-            if r != col {
-                let f = row[col] / pivot_row[col];
-                for (v, p) in row.iter_mut().zip(pivot_row).skip(col) {
-                    *v -= f * p;
-                }
-            }
-        }
-    }
-    let coef: Vec<f64> = (0..4).map(|i| m[i][4] / m[i][i]).collect();
-    Some(
-        points
-            .iter()
-            .map(|&(u, v)| v - coef[0] - u * (coef[1] + u * (coef[2] + u * coef[3])))
-            .collect(),
-    )
-}
-
-/// How much wider a least-squares standard error is when the residuals, in time order,
-/// are correlated from one box to the next: `sqrt((1 + rho) / (1 - rho))` with `rho` their
-/// lag-1 autocorrelation (an AR(1) process' variance inflation of a mean), 1 for `rho <= 0`,
-/// `rho` capped at [`MAX_RESIDUAL_AUTOCORRELATION`].
-///
-/// A detector's box does not jitter independently from frame to frame: it stays too wide or
-/// shifted for many frames (a shadow, a partial occlusion, a box that grows in steps). On
-/// real corpus clips a parabola's residuals had lag-1 autocorrelations of 0.6-0.95, so
-/// the white-noise error understated the bend's error by 2-6 times and wobbly tracks on
-/// straight roads read as significantly bent.
-fn autocorrelation_inflation(residuals: &[f64]) -> f64 {
-    let energy: f64 = residuals.iter().map(|r| r * r).sum();
-    let lagged: f64 = residuals.windows(2).map(|w| w[0] * w[1]).sum();
-    if !(energy > 0.0 && lagged > 0.0) {
-        return 1.0;
-    }
-    let rho = (lagged / energy).min(MAX_RESIDUAL_AUTOCORRELATION);
-    ((1.0 + rho) / (1.0 - rho)).sqrt()
-}
-
-/// The highest lag-1 autocorrelation [`autocorrelation_inflation`] believes: beyond it the
-/// residuals are a smooth misfit, not noise (inflation at most about 6.2).
-const MAX_RESIDUAL_AUTOCORRELATION: f64 = 0.95;
 
 /// Inverse of a 3x3 matrix, `None` when (nearly) singular.
 fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
