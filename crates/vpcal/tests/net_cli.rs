@@ -4,7 +4,7 @@
 
 use crate::common;
 
-use common::{read_json, real_data, stderr, stdout, text, vpcal};
+use common::{last_stdout_json, read_json, real_data, stderr, stdout, text, vpcal};
 
 #[test]
 fn train_resume_and_predict_on_toy_data() {
@@ -104,12 +104,7 @@ fn train_resume_and_predict_on_toy_data() {
         "--json",
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    let line = String::from_utf8_lossy(&o.stdout)
-        .lines()
-        .last()
-        .unwrap()
-        .to_string();
-    let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+    let v = last_stdout_json(&o);
     assert_eq!(v["spreads"].as_array().unwrap().len(), 4);
     // frame = centre + box-frame * half size, when the VP is finite.
     if let (Some(b), Some(f)) = (v["vp1_box"].as_array(), v["vp1_frame"].as_array()) {
@@ -311,11 +306,6 @@ fn encoder_network_trains_frozen_resumes_and_predicts() {
         "--json",
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    let line = String::from_utf8_lossy(&o.stdout)
-        .lines()
-        .last()
-        .unwrap()
-        .to_string();
-    let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+    let v = last_stdout_json(&o);
     assert_eq!(v["spreads"].as_array().unwrap().len(), 4, "{v}");
 }

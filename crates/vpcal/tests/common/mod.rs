@@ -41,6 +41,14 @@ pub fn real_data(sub: &str) -> Option<PathBuf> {
     }
 }
 
+/// The last line of a command's standard output, parsed as JSON (`--json` prints one object
+/// after any progress lines).
+pub fn last_stdout_json(o: &Output) -> serde_json::Value {
+    let out = String::from_utf8_lossy(&o.stdout);
+    let line = out.lines().last().unwrap_or_default();
+    serde_json::from_str(line).unwrap_or_else(|e| panic!("not JSON ({e}): {line}"))
+}
+
 pub fn read_json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
 }
