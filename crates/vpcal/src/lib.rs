@@ -21,8 +21,6 @@
 //! The building blocks live in the other crates of the workspace: geometry and aggregation
 //! (`vpcal-geom`), file formats (`vpcal-formats`, with the calibration file type), the network
 //! (`vpcal-net`), footage and detectors (`vpcal-video`), the synthetic world (`vpcal-synth`).
-// The calibration file's evidence object is one `serde_json::json!` literal of 40-odd keys.
-#![recursion_limit = "256"]
 
 pub mod aggregate;
 pub mod autoscale;
