@@ -7,9 +7,10 @@ use proptest::prelude::*;
 use vpcal_geom::aggregate::edgelets::{
     self, fit_curved, near_rays, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
 };
+use vpcal_geom::aggregate::focal;
 use vpcal_geom::aggregate::robust::{
     aggregate, aggregate_with_edgelets, focal_prior_range_widths, focal_widths,
-    rays_focal_posterior, RobustOptions, RAYS_MEASURE_WIDTH_SHARE, TRAFFIC_FOV_DEG,
+    rays_focal_likelihood, rays_focal_posterior, RobustOptions, TRAFFIC_FOV_DEG,
 };
 use vpcal_geom::aggregate::tracks::Tangent;
 use vpcal_geom::aggregate::VehicleVps;
@@ -246,13 +247,23 @@ fn the_rays_posterior_narrows_f_where_vp2_is_near_and_is_the_prior_where_it_is_f
     assert!(p16 < 1100.0 && 1100.0 < p84, "{p16} {p50} {p84}");
     assert!((p50 / 1100.0 - 1.0).abs() < 0.05, "{p50}");
     assert!((p84 / p16).ln() < 0.5 * prior_log_width(), "{p16}-{p84}");
-    // Looking 3° across it VP2 lies far along the horizon: the rays cannot measure f.
+    // Looking 3° across it VP2 lies far along the horizon: the rays cannot measure f (they
+    // carry less information on it than the prior), and the focal length stays the prior's.
     let far = Scene::new(1100.0, 0.35, 0.0, 0.05, 8.0);
-    let [p16, _, p84] = exact_rays_posterior(&far, 5.0);
-    assert!(
-        (p84 / p16).ln() > RAYS_MEASURE_WIDTH_SHARE * prior_log_width(),
-        "{p16}-{p84}"
-    );
+    let (vp1, vp2) = (far.vp([0.0, 1.0, 0.0]), far.vp([1.0, 0.0, 0.0]));
+    let roll = (vp2.y - vp1.y).atan2(vp2.x - vp1.x);
+    let range = focal_prior_range_widths(None).map(|r| r * 1920.0);
+    let rays = rays_focal_likelihood(vp1, far.pp, range, [far.f.ln(), roll], 5.0).unwrap();
+    let p = focal::fuse(
+        range,
+        &[focal::Cue {
+            source: "network_rays",
+            likelihood: rays,
+        }],
+    )
+    .unwrap();
+    assert!(!p.measured && p.carried_by.is_empty(), "{p:?}");
+    assert!((p.focal_px / (range[0] * range[1]).sqrt() - 1.0).abs() < 1e-9);
 }
 
 #[test]
@@ -310,11 +321,13 @@ fn a_known_focal_range_bounds_the_rays_and_the_assumed_focal_length() {
         };
         aggregate(&vehicles, scene.pp, &opts).unwrap()
     };
-    // A range around the truth: the rays measure f inside it.
-    let r = with_range([700.0, 1400.0]);
+    // A range around the truth, wider than what the rays say: they measure f inside it. (A
+    // range as narrow as the rays' own interval leaves them nothing to add: f would stay its
+    // middle.)
+    let r = with_range([500.0, 2000.0]);
     assert!(r.evidence.focal_from_rays, "{:?}", r.evidence);
     let [p16, _, p84] = r.evidence.rays_posterior_px.unwrap();
-    assert!(700.0 <= p16 && p84 <= 1400.0, "{p16}-{p84}");
+    assert!(500.0 <= p16 && p84 <= 2000.0, "{p16}-{p84}");
     assert!((r.calibration.focal_px / 1000.0 - 1.0).abs() < 0.1);
     // A range the rays contradict: they do not measure, f is the range's middle.
     let r = with_range([2000.0, 4000.0]);
@@ -392,12 +405,15 @@ fn bootstrap_confidence_brackets_the_estimate_and_is_deterministic() {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 12, .. ProptestConfig::default() })]
     #[test]
-    fn recovers_varied_cameras(f in 900.0f64..2200.0, pitch in 0.25f64..0.6, roll_deg in -1.5f64..1.5,
+    fn recovers_varied_cameras(f in 960.0f64..2200.0, pitch in 0.25f64..0.6, roll_deg in -1.5f64..1.5,
                                yaw in prop_oneof![-0.7f64..-0.25, 0.25f64..0.7], seed in 0u64..1000) {
         let scene = Scene::new(f, pitch, roll_deg.to_radians(), yaw, 8.0);
         let vehicles = cloud(&scene, 2000, 0.4, seed);
         // f within 5 %: at the smallest yaw VP2 is far and its rays nearly parallel; a case
         // at 3.7 % turned up (the regressions file keeps it). 120 random cases passed at 5 %.
+        // The focal lengths are those of the 15-90° band at 1920 px: past its wide end (a
+        // 94° view at 900 px) the prior's soft edge pulls a fit with the model's 18 % error
+        // by about 5 % towards the band, by design.
         check(&scene, &vehicles, 0.05, 0.5);
     }
 }

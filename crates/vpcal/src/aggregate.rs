@@ -90,27 +90,9 @@ impl FocalSource {
 
 pub use vpcal_geom::aggregate::robust::TRAFFIC_FOV_DEG;
 
-/// Model error of a measured focal length (edgelets, the network's VP2 rays) in `ln f`, added
-/// in quadrature to the bootstrap's spread in its 68 % interval: the bootstrap resamples the
-/// vehicles, not the ways the model can be wrong (edgelets of one body part, a road that
-/// bends slightly, a VP2 near infinity). Measured on the 14-scene synthetic suite with true
-/// boxes (`scripts/suite_focal.sh`, 100 frames): the 9 edgelet focal lengths erred by -23 % to
-/// +46 %, the 68th percentile of `|ln(f / f_true)|` 0.185, while the bootstrap intervals were
-/// 0.1-10 % wide and held the truth for none of them.
-pub const MEASURED_FOCAL_MODEL_LOG_SD: f64 = 0.18;
-
-/// The 68 % interval of a measured focal length `f` whose bootstrap gave `[p16, p84]`:
-/// `f · exp(±sqrt(s_b² + s_t² + s_m²))`, with `s_b` half the bootstrap's log width, `s_t` how
-/// far a systematic turn of the evidence moves `ln f` (the edgelet fit's
-/// `focal_bias_log_spread`; 0 where none was measured) and `s_m`
-/// [`MEASURED_FOCAL_MODEL_LOG_SD`].
-pub fn measured_focal_interval(f: f64, bootstrap: [f64; 2], turn_log_sd: f64) -> [f64; 2] {
-    let finite = |x: f64| if x.is_finite() { x } else { 0.0 };
-    let sb = finite(0.5 * (bootstrap[1] / bootstrap[0]).ln().abs());
-    let st = finite(turn_log_sd);
-    let s = (sb * sb + st * st + MEASURED_FOCAL_MODEL_LOG_SD * MEASURED_FOCAL_MODEL_LOG_SD).sqrt();
-    [f * (-s).exp(), f * s.exp()]
-}
+/// Model error of a measured focal length in `ln f` (the robust method's
+/// `focal::MODEL_LOG_SD`, part of every geometric cue's likelihood).
+pub use vpcal_geom::aggregate::focal::MODEL_LOG_SD as MEASURED_FOCAL_MODEL_LOG_SD;
 
 /// The 68 % interval of a focal length nobody measured, for frames `width` pixels wide: the
 /// central 68 % (16th to 84th percentile) of a distribution uniform in `ln f` over the focal
@@ -120,10 +102,13 @@ pub fn assumed_focal_interval(width: u32) -> [f64; 2] {
     range_focal_interval([short, long])
 }
 
-/// The central 68 % of a distribution uniform in `ln f` over `[short, long]` pixels.
+/// The central 68 % of a distribution uniform in `ln f` over `[short, long]` pixels
+/// (`vpcal_geom::aggregate::focal::prior_percentiles`).
 pub fn range_focal_interval(range_px: [f64; 2]) -> [f64; 2] {
-    let (lo, hi) = (range_px[0].ln(), range_px[1].ln());
-    [(lo + 0.16 * (hi - lo)).exp(), (lo + 0.84 * (hi - lo)).exp()]
+    match vpcal_geom::aggregate::focal::prior_percentiles(range_px) {
+        Some([lo, _, hi]) => [lo, hi],
+        None => [f64::NAN, f64::NAN],
+    }
 }
 
 /// Check a focal-length range `[short, long]` (pixels) given by the user.
@@ -489,90 +474,78 @@ pub fn aggregate(
                     }
                 }
             );
-            // The curved-road fit can set the focal length with the horizon (from the tracks'
-            // tangents and the edgelets), whether or not the straight edgelet fit could.
-            let focal_source = if e.focal_from_edgelets || e.curved_focal {
-                FocalSource::Edgelets
-            } else if e.rays_trusted {
-                FocalSource::Network
-            } else if e.focal_from_rays {
-                FocalSource::NetworkRays
-            } else {
-                FocalSource::Prior
-            };
-            // Where the rays' posterior gave f, its percentiles are the interval.
-            let posterior = e.rays_posterior_px.filter(|_| e.focal_from_rays);
-            // How far a systematic turn of the edges moves f: only the straight edgelet fit
-            // that fixed f measures it.
-            let turn_log_sd = match focal_source {
-                FocalSource::Edgelets if !e.curved_fit => e.edgelet_focal_bias_log_spread,
-                _ => None,
-            };
-            let rays_note = |e: &robust::Evidence| {
-                format!(
-                    "the rays scatter {} around their own VP2, taken as ±{} off",
-                    deg(e.rays_scatter_deg),
-                    deg(e.rays_vp2_sd_deg)
-                )
+            // The focal length is the posterior of the prior and every cue
+            // (`vpcal_geom::aggregate::focal`): measured when the cues carry at least the
+            // prior's information, named after the cue that carried most.
+            let focal = &r.focal;
+            let focal_source = match focal.carried_by.first().copied() {
+                Some("edgelets" | "curved_edgelets") => FocalSource::Edgelets,
+                Some("network") => FocalSource::Network,
+                Some("network_rays") => FocalSource::NetworkRays,
+                _ => FocalSource::Prior,
             };
             let prior_name = match focal_range_px {
                 Some([a, b]) => format!("the given {a:.0}-{b:.0} px range"),
                 None => format!("the {}-{}° prior", TRAFFIC_FOV_DEG[0], TRAFFIC_FOV_DEG[1]),
             };
-            let focal_interval_px = if let Some([lo, _, hi]) = posterior {
+            let what = |source: &str| match source {
+                "edgelets" => "the edges across the vehicles".to_string(),
+                "curved_edgelets" => "the curved-road fit".to_string(),
+                "network" => "the network's VP2 points and rays".to_string(),
+                "network_rays" => "the network's VP2 rays".to_string(),
+                other => other.to_string(),
+            };
+            let cue_note = |c: &vpcal_geom::aggregate::focal::CueReport| {
+                let [lo, hi] = c.interval_px;
+                let what = what(c.source);
+                if c.used {
+                    format!(
+                        "{what} {:.0} px (with the prior {lo:.0}-{hi:.0}, {:.0} % of the \
+                         evidence)",
+                        c.focal_px,
+                        100.0 * c.share
+                    )
+                } else {
+                    format!(
+                        "{what} {:.0} px (contradicts the prior: not used)",
+                        c.focal_px
+                    )
+                }
+            };
+            let cues: Vec<String> = focal.cues.iter().map(cue_note).collect();
+            let cues = if cues.is_empty() {
+                "no cue".to_string()
+            } else {
+                cues.join(", ")
+            };
+            let [lo, hi] = focal.interval_px;
+            if focal_source.is_assumed() {
                 summary.push_str(&format!(
-                    "; focal length {:.0} px from the network's VP2 rays within {prior_name} \
-                     ({}; 68% interval {lo:.0}-{hi:.0} px)",
-                    r.calibration.focal_px,
-                    rays_note(e)
-                ));
-                Some([lo, hi])
-            } else if focal_source.is_assumed() {
-                let [lo, hi] = match focal_range_px {
-                    Some(range) => range_focal_interval(range),
-                    None => assumed_focal_interval(image_size.0),
-                };
-                summary.push_str(&format!(
-                    "; focal length ASSUMED ({:.0} px, the middle of {prior_name}: no evidence \
-                     fixed it; 68% interval {lo:.0}-{hi:.0} px)",
+                    "; focal length ASSUMED ({:.0} px: {prior_name}, the evidence too weak to \
+                     measure it: {cues}; 68% interval {lo:.0}-{hi:.0} px)",
                     r.calibration.focal_px
                 ));
-                Some([lo, hi])
             } else {
-                r.confidence.as_ref().map(|c| {
-                    let [lo, hi] = measured_focal_interval(
-                        r.calibration.focal_px,
-                        [c.focal_px_p16, c.focal_px_p84],
-                        turn_log_sd.unwrap_or(0.0),
-                    );
-                    // A curved-road fit that the straight fit contradicts: either may be
-                    // right, so the interval spans both.
-                    match straight_fit_disagreeing(e, r.calibration.focal_px) {
-                        Some(fs) => [lo.min(fs), hi.max(fs)],
-                        None => [lo, hi],
-                    }
-                })
-            };
+                summary.push_str(&format!(
+                    "; focal length {:.0} px from {} within {prior_name} ({cues}; 68% \
+                     interval {lo:.0}-{hi:.0} px)",
+                    r.calibration.focal_px,
+                    focal
+                        .carried_by
+                        .iter()
+                        .map(|s| what(s))
+                        .collect::<Vec<_>>()
+                        .join(" and ")
+                ));
+            }
+            // A curved-road fit that the straight fit contradicts: either may be right, so the
+            // interval spans both.
+            let focal_interval_px =
+                Some(match straight_fit_disagreeing(e, r.calibration.focal_px) {
+                    Some(fs) => [lo.min(fs), hi.max(fs)],
+                    None => [lo, hi],
+                });
             if let Some(c) = &r.confidence {
-                if let (false, None, Some([lo, hi])) =
-                    (focal_source.is_assumed(), posterior, focal_interval_px)
-                {
-                    let turn = turn_log_sd.map_or(String::new(), |t| {
-                        format!(
-                            ", a {}° turn of the edges ±{:.0} %",
-                            vpcal_geom::aggregate::edgelets::EDGE_BIAS_DEG,
-                            100.0 * (t.exp() - 1.0)
-                        )
-                    });
-                    summary.push_str(&format!(
-                        "; focal 68% interval {lo:.0}-{hi:.0} px from {} (bootstrap {:.0}-{:.0} \
-                         px, model error ±{:.0} %{turn})",
-                        focal_source.name(),
-                        c.focal_px_p16,
-                        c.focal_px_p84,
-                        100.0 * (MEASURED_FOCAL_MODEL_LOG_SD.exp() - 1.0)
-                    ));
-                }
                 // Rays that put VP2 at infinity give absurd focal lengths: say so instead.
                 let alone = c.focal_px_data_only;
                 let alone = if alone.is_finite() && alone <= 1000.0 * f64::from(image_size.0) {
@@ -585,7 +558,21 @@ pub fn aggregate(
                     c.horizon_angle_sd_deg
                 ));
             }
-            let evidence = serde_json::json!({
+            let focal_cues: Vec<serde_json::Value> = r
+                .focal
+                .cues
+                .iter()
+                .map(|c| {
+                    serde_json::json!({
+                        "source": c.source,
+                        "focal_px": c.focal_px,
+                        "interval_px": c.interval_px,
+                        "share": c.share,
+                        "used": c.used,
+                    })
+                })
+                .collect();
+            let mut evidence = serde_json::json!({
                 "method": method.name(),
                 "pairs_in": e.pairs_in,
                 "pairs_used": e.pairs_used,
@@ -631,6 +618,13 @@ pub fn aggregate(
                     .map(|c| [c.focal_px_p16, c.focal_px_p84]),
                 "vp2_rays_only_focal_px": r.confidence.as_ref().map(|c| c.focal_px_data_only),
             });
+            if let Some(o) = evidence.as_object_mut() {
+                o.insert(
+                    "focal_sources".into(),
+                    serde_json::json!(r.focal.carried_by),
+                );
+                o.insert("focal_cues".into(), serde_json::Value::Array(focal_cues));
+            }
             let confidence = r.confidence.as_ref().map(|c| Confidence {
                 horizon_angle_sd_deg: c.horizon_angle_sd_deg,
                 vp1_sd_px: c.vp1_sd_px,
@@ -667,26 +661,6 @@ pub fn widths_away(widths: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_measured_interval_carries_the_model_error() {
-        // A bootstrap that agrees with itself still leaves the model's ±18 % in ln f.
-        let [lo, hi] = measured_focal_interval(1000.0, [1000.0, 1000.0], 0.0);
-        assert!(((hi / 1000.0).ln() - MEASURED_FOCAL_MODEL_LOG_SD).abs() < 1e-12);
-        assert!(((1000.0 / lo).ln() - MEASURED_FOCAL_MODEL_LOG_SD).abs() < 1e-12);
-        // A wide bootstrap adds in quadrature.
-        let [lo, hi] = measured_focal_interval(
-            1000.0,
-            [1000.0 * (-0.24f64).exp(), 1000.0 * 0.24f64.exp()],
-            0.0,
-        );
-        let s = (0.24f64 * 0.24 + MEASURED_FOCAL_MODEL_LOG_SD * MEASURED_FOCAL_MODEL_LOG_SD).sqrt();
-        assert!(((hi / lo).ln() - 2.0 * s).abs() < 1e-12);
-        // So does the effect of a systematic turn of the evidence.
-        let [lo, hi] = measured_focal_interval(1000.0, [1000.0, 1000.0], 0.3);
-        let s = (0.3f64 * 0.3 + MEASURED_FOCAL_MODEL_LOG_SD * MEASURED_FOCAL_MODEL_LOG_SD).sqrt();
-        assert!(((hi / lo).ln() - 2.0 * s).abs() < 1e-12);
-    }
 
     fn with_evidence(focal_source: FocalSource, e: robust::Evidence) -> Aggregated {
         Aggregated {

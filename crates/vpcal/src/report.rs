@@ -678,7 +678,7 @@ fn focal_source_words(source: &str) -> &'static str {
         "edgelets" => "measured: edges across the vehicles (edgelets) placed VP2",
         "network" => "measured: the network's VP2 points and rays agreed",
         "network_rays" => "measured: the network's VP2 rays, weighed against the plausible range",
-        "prior" => "ASSUMED: no evidence fixed it; the middle of the plausible range",
+        "prior" => "ASSUMED: the evidence weighed less than the plausible range; its middle",
         "given" => "given by the user (--focal)",
         "per_vehicle_median" => "the median of the per-vehicle focal lengths (reference method)",
         _ => "(unknown source)",
@@ -784,6 +784,40 @@ fn focal_section(file: &CalibrationFile) -> String {
                 ),
             ));
         }
+    }
+    // Each cue of the focal posterior: its own focal length, its interval with the prior
+    // alone, its share of the evidence.
+    for c in ev(file, "focal_cues")
+        .and_then(Value::as_array)
+        .into_iter()
+        .flatten()
+    {
+        let interval: Vec<f64> = c["interval_px"]
+            .as_array()
+            .map(|a| a.iter().filter_map(Value::as_f64).collect())
+            .unwrap_or_default();
+        let (lo, hi) = match interval[..] {
+            [lo, hi] => (Some(lo), Some(hi)),
+            _ => (None, None),
+        };
+        rows.push((
+            "cue of the focal posterior",
+            format!(
+                "{}: {} px; with the prior alone 68% {}-{} px; {}",
+                c["source"].as_str().unwrap_or("?"),
+                num(c["focal_px"].as_f64(), 0),
+                num(lo, 0),
+                num(hi, 0),
+                if c["used"].as_bool() == Some(true) {
+                    format!(
+                        "{} % of the evidence",
+                        num(c["share"].as_f64().map(|v| 100.0 * v), 0)
+                    )
+                } else {
+                    "contradicts the prior: not used".to_string()
+                }
+            ),
+        ));
     }
     if let Some(v) = ev_f64(file, "vp2_rays_only_focal_px").filter(|v| v.is_finite() && *v > 0.0) {
         markers.push(Marker {

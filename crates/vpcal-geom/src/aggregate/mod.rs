@@ -8,6 +8,7 @@
 //!   duplicate and small boxes down-weighted; bootstrap confidence.
 
 pub mod edgelets;
+pub mod focal;
 pub mod reference;
 pub mod robust;
 pub mod scene_lines;

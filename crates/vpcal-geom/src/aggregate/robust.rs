@@ -46,29 +46,33 @@
 //!    in the biased regime it is Cauchy (its unbounded tail lets systematically deviating
 //!    rays still pull, which measured better on the real CNN outputs: 8.8 / 22 / 9.1 % vs
 //!    9.3 / 21 / 9.0 % pooled for the three public CNNs).
-//!    **Untrusted rays within the prior** ([`rays_focal_posterior`]): otherwise the rays
-//!    alone still place VP2 on a horizon, off by an angle taken as
-//!    [`RAY_SYSTEMATIC_PER_SCATTER`] times their scatter; with the physical prior that gives
-//!    a posterior for `f`, used when it is less than half as wide as the prior
-//!    ([`RAYS_MEASURE_WIDTH_SHARE`]: a near VP2), the rays' own `f` lies in the prior's range,
-//!    the road is straight and the vehicles' edges are not parallel; `f` is then its median,
-//!    the roll refitted.
+//!    **Untrusted rays** ([`rays_focal_likelihood`]): otherwise the rays alone still place
+//!    VP2 on a horizon, off by an angle taken as [`RAY_SYSTEMATIC_PER_SCATTER`] times their
+//!    scatter: a likelihood of `f`, one cue of the focal posterior (step 6).
 //! 5. **Edgelets** ([`aggregate_with_edgelets`], [`super::edgelets`]): without tracks, VP1
 //!    is re-fitted to the edges along the vehicles (they point at VP1). With the edges across
 //!    the vehicles that point at VP2, (f, roll) is fitted again with VP1 fixed; the roll
-//!    replaces the one above when its bootstrap spread is small, and the focal length too when
-//!    it is identified (VP2 within `max_vp2_widths` image widths, small spread).
-//! 6. **Confidence**: a bootstrap over vehicles (re-weighting with Poisson(1) counts) re-fits
+//!    replaces the one above when its bootstrap spread is small, and the focal length is a
+//!    cue where it is identified (VP2 within `max_vp2_widths` image widths, small spread, a
+//!    systematic turn of the edges moving it little: beyond these the fit fails in ways its
+//!    bootstrap does not show, e.g. pixel staircases on nearly horizontal edges).
+//! 6. **The focal posterior** ([`super::focal`]): the prior (uniform in `ln f` over 15-90°
+//!    views, soft edges) times the cues that apply: on a straight road the edgelets, the
+//!    trusted rays' fit or the untrusted rays' likelihood; on a curved road the curved-road
+//!    fit only (each car has its own VP2 there). `f` is the posterior's median where the cues
+//!    carry at least the prior's information, else the prior's middle; the roll and ray bias
+//!    are refitted with `f` held where no edgelets set the roll.
+//! 7. **Confidence**: a bootstrap over vehicles (re-weighting with Poisson(1) counts) re-fits
 //!    VP1 and (f, θ, δ); the 16th-84th percentiles of `f` and the spread of the horizon angle
 //!    are reported, with the focal length the data alone prefers (no focal prior).
-//! 7. **Vehicles stand below the horizon.** An estimate whose horizon has more than
+//! 8. **Vehicles stand below the horizon.** An estimate whose horizon has more than
 //!    `max_above_horizon` (half) of the vehicle weight's box centres above it is impossible,
 //!    and is reported as not enough evidence instead of returned. On the synthetic suite the
 //!    outright failures had 98-100 % above (one had 11 %), every other result none
 //!    (`scripts/horizon_vs_boxes.py`); a tighter 10 % also refused a real residential-street
 //!    clip with a plausible horizon (motion boxes of distant cars and foliage near it).
 //!
-//! 8. **Vehicles grow away from the horizon** ([`super::sizes`]): an estimate whose horizon
+//! 9. **Vehicles grow away from the horizon** ([`super::sizes`]): an estimate whose horizon
 //!    the boxes' sizes contradict (they do not grow with the distance below it) is reported
 //!    as not enough evidence: near-top-down views, where the VPs are near infinity and the
 //!    focal length cannot be observed, end here.
@@ -77,6 +81,7 @@
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
 use super::edgelets::{self as edge, BoxEdgelets, CurvedVehicle, Edgelet, EdgeletFitOptions};
+use super::focal::{self, Cue, FocalPosterior, Likelihood};
 use super::line_angle_diff;
 use super::scene_lines::{self, SceneLineOptions};
 use super::tracks::{self, TrackLine, TrackOptions};
@@ -301,8 +306,8 @@ pub struct Evidence {
     /// vehicles.
     pub curved_fit: bool,
     pub curved_vehicles: usize,
-    /// Whether the curved-road fit's focal length was used (its bootstrap narrows the prior
-    /// as the rays' posterior must); without it the fit gave the horizon only.
+    /// Whether the curved-road fit carried the focal length in its posterior
+    /// (`super::focal`); without it the fit gave the horizon only.
     #[serde(default)]
     pub curved_focal: bool,
     /// Edgelets (and vehicles with edgelets) the edgelet fit used; 0 without one.
@@ -320,7 +325,8 @@ pub struct Evidence {
     /// How much the scene lines' VP1 raised the median angle of the vehicles' VP1 lines
     /// (degrees), whether or not it was used (`None`: no scene fit).
     pub vp1_scene_extra_deg: Option<f64>,
-    /// Whether the horizon's roll, and the focal length, came from the edgelets.
+    /// Whether the horizon's roll came from the edgelets, and whether the straight edgelet
+    /// fit carried the focal length in its posterior.
     pub roll_from_edgelets: bool,
     pub focal_from_edgelets: bool,
     /// The edgelet fit's focal length (px) and the bootstrap spread of its roll (degrees),
@@ -342,7 +348,7 @@ pub struct Evidence {
     /// weighted median angle of the rays around it (degrees), the systematic error assumed
     /// for their VP2 ([`RAY_SYSTEMATIC_PER_SCATTER`] times that, degrees), and the 16th,
     /// 50th and 84th percentiles of the focal length under the physical prior and that
-    /// evidence ([`rays_focal_posterior`]).
+    /// evidence alone ([`rays_focal_posterior`]).
     #[serde(default)]
     pub rays_focal_px: Option<f64>,
     #[serde(default)]
@@ -351,8 +357,7 @@ pub struct Evidence {
     pub rays_vp2_sd_deg: Option<f64>,
     #[serde(default)]
     pub rays_posterior_px: Option<[f64; 3]>,
-    /// Whether the focal length came from that posterior (its 68 % interval at most
-    /// [`RAYS_MEASURE_WIDTH_SHARE`] of the prior's in `ln f`).
+    /// Whether the rays carried the focal length in its posterior (`super::focal`).
     #[serde(default)]
     pub focal_from_rays: bool,
 }
@@ -385,6 +390,8 @@ pub struct RobustResult {
     pub evidence: Evidence,
     /// `None` when `bootstrap` is 0.
     pub confidence: Option<Confidence>,
+    /// The focal length's posterior (its median is `calibration.focal_px`).
+    pub focal: FocalPosterior,
     /// The straight vehicle tracks found (whether or not VP1 came from them).
     pub track_lines: Vec<TrackLine>,
 }
@@ -967,33 +974,20 @@ fn points_focal(prep: &Prepared, w: &[f64], vp1: Point2, pp: Point2) -> Option<f
 /// The systematic error of the VP2 that a network's rays give, as a multiple of the rays'
 /// scatter around it (their weighted median angle, at least [`RAY_MIN_SCATTER_DEG`]): a
 /// network's VP2 error is mostly common to the view, so the rays' agreement is no measure of
-/// it, but networks whose rays scatter more also err more. Calibrated on real data so that the
-/// rays' 68 % focal intervals hold the truth as often as they claim: on BrnoCompSpeed
-/// sessions 0-3 with the three public CNNs' VPout files against `camera_truth.json`
-/// (`scripts/focal_coverage.py`, the rays' posterior used where it passes
-/// [`RAYS_MEASURE_WIDTH_SHARE`]), multiples of 4 / 5 / 6 / 8 gave the rays the focal length of
-/// 17 / 14 / 11 / 8 of 35 videos, their intervals holding the reference focal length for 53 /
-/// 71 / 73 / 75 % of them (median focal error 13.5 / 9.8 / 9.5 / 4.9 %): 5 is the smallest
-/// that covers at least 68 %.
-pub const RAY_SYSTEMATIC_PER_SCATTER: f64 = 5.0;
+/// it, but networks whose rays scatter more also err more. Measured on two sources, the
+/// rays' likelihood taken into the focal posterior (`super::focal`):
+/// - BrnoCompSpeed sessions 0-3, the three public CNNs' VPout files against
+///   `camera_truth.json` (`scripts/focal_coverage.py`; these CNNs put VP2 too near): with 5
+///   the rays measured f on 21 of 35 videos, their intervals holding the reference for 57 %
+///   (median focal error 20.7 %); with 8 on 12, holding it for 83 % (9.0 %).
+/// - The synthetic suite with the bundled network (true boxes, 100 frames; this network puts
+///   VP2 too far): at 5 the truth lay 0.6-1.8 standard errors from the rays' posterior,
+///   always on the near side; at 8 within about one, and the rays no longer pulled the
+///   edgelets' focal length off the truth (synth02 +15 % with 5, +7 % with 8).
+pub const RAY_SYSTEMATIC_PER_SCATTER: f64 = 8.0;
 
 /// The scatter below which the rays' systematic error is not taken to shrink, degrees.
 pub const RAY_MIN_SCATTER_DEG: f64 = 1.0;
-
-/// The focal length counts as measured by the rays when the 68 % interval of its posterior
-/// spans at most this share of the prior's in `ln f`; wider, it stays assumed.
-pub const RAYS_MEASURE_WIDTH_SHARE: f64 = 0.5;
-
-/// The curved-road fit's focal length counts as measured when its bootstrap's 68 % interval
-/// (over vehicles) spans at most this share of the prior's in `ln f`: narrower than the prior
-/// at all. On the real corpus clips (300 frames) the fits it refuses gave 4,811 px with an
-/// interval of 98-235,185 px (an elevated arterial) and 2,714 px with 457-3,991 px (a street
-/// CCTV); it keeps a 1,377 px fit (737-2,069 px with the model error) on an urban arterial,
-/// which half the prior's width, as for the rays ([`RAYS_MEASURE_WIDTH_SHARE`]), refused.
-/// (A fit outside the prior's range is refused too: a highway seen from an overpass gave
-/// 550 px at 1280 px width, a 98° view, whose tracks' median speed is 95 km/h with it and
-/// 205 km/h with the prior's 1,764 px.)
-pub const CURVED_MEASURE_WIDTH_SHARE: f64 = 1.0;
 
 /// An edgelet VP2 farther than this many image widths from the principal point says the
 /// edges across the vehicles are parallel in the image (f > 100 widths is a 0.6° view: no
@@ -1001,21 +995,9 @@ pub const CURVED_MEASURE_WIDTH_SHARE: f64 = 1.0;
 /// placed, and the focal length is not observable.
 pub const PARALLEL_EDGES_VP2_WIDTHS: f64 = 100.0;
 
-/// Points of the `ln f` grid the posterior is evaluated on.
-const POSTERIOR_GRID: usize = 400;
-
 /// The focal length's distribution given the network's VP2 rays and the physical prior:
-/// `(ln f, roll)` is what the rays alone fit (with VP1 at `vp1`), `sd_deg` the systematic
-/// error of the VP2 they place. For a candidate `f`, the VP2 orthogonal to VP1 on the rays'
-/// horizon is compared with the rays' VP2 as directions seen through a lens of that focal
-/// length; the likelihood is Gaussian in that angle, the prior uniform in `ln f` over
-/// `range_px` (`[short, long]` focal lengths, pixels: the [`TRAFFIC_FOV_DEG`] views' unless
-/// the camera's range is known). Returns the 16th, 50th and 84th percentiles, pixels; `None`
-/// when the rays' fit is not finite.
-///
-/// The angle, not `ln f`, carries the error because a network errs by angles: a VP2 far
-/// along the horizon moves a long way for a small angle, so the same rays say little about f
-/// there (a telephoto view) and much where VP2 is near (a wide view).
+/// [`rays_focal_likelihood`] within the prior uniform in `ln f` over `range_px`. Returns the
+/// 16th, 50th and 84th percentiles, pixels; `None` when the rays' fit is not finite.
 pub fn rays_focal_posterior(
     vp1: Point2,
     pp: Point2,
@@ -1023,6 +1005,27 @@ pub fn rays_focal_posterior(
     rays: [f64; 2],
     sd_deg: f64,
 ) -> Option<[f64; 3]> {
+    let l = rays_focal_likelihood(vp1, pp, range_px, rays, sd_deg)?;
+    focal::alone(range_px, &l)
+}
+
+/// What the network's VP2 rays say about the focal length: `(ln f, roll)` is what the rays
+/// alone fit (with VP1 at `vp1`), `sd_deg` the systematic error of the VP2 they place. For a
+/// candidate `f`, the VP2 orthogonal to VP1 on the rays' horizon is compared with the rays'
+/// VP2 as directions seen through a lens of that focal length; the likelihood is Gaussian in
+/// that angle, tabulated over `range_px` (`[short, long]` focal lengths, pixels). `None` when
+/// the rays' fit is not finite.
+///
+/// The angle, not `ln f`, carries the error because a network errs by angles: a VP2 far
+/// along the horizon moves a long way for a small angle, so the same rays say little about f
+/// there (a telephoto view) and much where VP2 is near (a wide view).
+pub fn rays_focal_likelihood(
+    vp1: Point2,
+    pp: Point2,
+    range_px: [f64; 2],
+    rays: [f64; 2],
+    sd_deg: f64,
+) -> Option<Likelihood> {
     let [ln_fr, roll] = rays;
     let [short, long] = range_px;
     if !(ln_fr.is_finite() && roll.is_finite() && sd_deg > 0.0 && 0.0 < short && short < long) {
@@ -1043,10 +1046,10 @@ pub fn rays_focal_posterior(
     let rays_vp2 = edge::vp2_direction(vp1, pp, ln_fr, roll);
     let (lo, hi) = (short.ln(), long.ln());
     let s = sd_deg.to_radians();
-    let grid: Vec<f64> = (0..POSTERIOR_GRID)
-        .map(|i| lo + (hi - lo) * (i as f64 + 0.5) / POSTERIOR_GRID as f64)
+    let ln_f: Vec<f64> = (0..=focal::GRID)
+        .map(|i| lo + (hi - lo) * i as f64 / focal::GRID as f64)
         .collect();
-    let log_lik: Vec<f64> = grid
+    let log_lik: Vec<f64> = ln_f
         .iter()
         .map(|&ln_f| {
             let f = ln_f.exp();
@@ -1055,24 +1058,14 @@ pub fn rays_focal_posterior(
             -0.5 * d * d
         })
         .collect();
-    let top = log_lik.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    if !top.is_finite() {
-        return None;
-    }
-    let mut cumulative = Vec::with_capacity(grid.len());
-    let mut total = 0.0;
-    for l in &log_lik {
-        total += (l - top).exp();
-        cumulative.push(total);
-    }
-    let quantile = |q: f64| {
-        let target = q * total;
-        let i = cumulative
-            .partition_point(|c| *c < target)
-            .min(grid.len() - 1);
-        grid[i].exp()
-    };
-    Some([quantile(0.16), quantile(0.5), quantile(0.84)])
+    log_lik
+        .iter()
+        .all(|l| l.is_finite())
+        .then(|| Likelihood::Table {
+            ln_f,
+            log_lik,
+            own_px: ln_fr.exp(),
+        })
 }
 
 /// What the VP2 rays alone say about the focal length.
@@ -1572,17 +1565,11 @@ pub fn aggregate_with_scene(
     let scene_shift = scene_vp1.map(|f| (f.vp1 - vp1).norm());
     let vp1 = scene_vp1.map_or(vp1, |f| f.vp1);
     let model = Vp2Model { vp1, ..model };
-    // Rays the VP2 points contradict still say something about f where VP2 is near: the
-    // focal length is the posterior of the prior and their evidence (`rays_focal_posterior`).
+    // Rays the VP2 points contradict still say something about f where VP2 is near: their
+    // likelihood over ln f (`rays_focal_likelihood`) is one cue of the focal posterior.
     let range_px = focal_prior_range_widths(opts.focal_range_widths).map(|r| r * width);
     let rays = (!rays_trusted).then(|| rays_focal(&model, &prep.weight, range_px));
     let posterior = rays.and_then(|r| r.posterior);
-    // The central 68 % of a uniform distribution spans 0.68 of its range.
-    let prior_log_width = 0.68 * (range_px[1] / range_px[0]).ln();
-    // Rays whose own focal length lies outside the prior's range contradict it (a VP2 at
-    // infinity, typically): the posterior then piles up at the range's end, narrow but not
-    // measured.
-    let inside_prior = |f: f64| (range_px[0]..=range_px[1]).contains(&f);
     // The edges across the vehicles, where they say those edges are parallel in the image
     // (a view looking almost straight down), contradict rays that place VP2 near.
     let edge_fit = edge_opts.and_then(|eo| edge::fit(vp1, pp, width, &boxes, x[1], eo, opts.seed));
@@ -1590,35 +1577,10 @@ pub fn aggregate_with_scene(
         let w = (e.vp2 - pp).norm() / width;
         w.is_nan() || w > PARALLEL_EDGES_VP2_WIDTHS
     });
-    // On a curved road every car has its own VP2: one VP2 for all the rays is the wrong model.
-    let focal_from_rays = !edges_parallel
-        && !road_curved
-        && rays.is_some_and(|r| inside_prior(r.fit[0].exp()))
-        && posterior.is_some_and(|[p16, _, p84]| {
-            (p84 / p16).ln() <= RAYS_MEASURE_WIDTH_SHARE * prior_log_width
-        });
-    let mut x = x;
-    // A posterior that stays nearly as wide as the prior is not used: weak rays would only
-    // pull the assumed focal length around (on the BrnoCompSpeed dev videos they doubled its
-    // median error).
-    let model = match posterior.filter(|_| focal_from_rays) {
-        Some([_, p50, _]) => {
-            let m = Vp2Model { f0: p50, ..model };
-            x = Vp2Model {
-                fixed_ln_f: Some(p50.ln()),
-                ..m
-            }
-            .fit(&prep.weight, Some([p50.ln(), x[1], x[2]]));
-            m
-        }
-        None => model,
-    };
     let usable = edge_fit.filter(|e| e.roll_usable);
+    let mut x = x;
     if let Some(e) = usable {
         x[1] = e.roll;
-        if e.focal_usable {
-            x[0] = e.focal_px.ln();
-        }
     }
     // On a curved road every car has its own VP1 on the horizon: fit the horizon and the
     // focal length to the cars' track tangents and edgelets together.
@@ -1638,18 +1600,8 @@ pub fn aggregate_with_scene(
             .collect();
         edge::fit_curved(pp, width, height, &vehicles, x[1], eo, opts.seed)
     });
-    // The curved fit's focal length is a measurement where its bootstrap (over vehicles)
-    // narrows the prior ([`CURVED_MEASURE_WIDTH_SHARE`]) and it lies in the prior's range;
-    // otherwise its horizon is used and f stays assumed.
-    let curved_focal = curved_fit.is_some_and(|c| {
-        (c.focal_px_p84 / c.focal_px_p16).ln() <= CURVED_MEASURE_WIDTH_SHARE * prior_log_width
-            && inside_prior(c.focal_px)
-    });
     let (model, vp1) = match curved_fit {
         Some(c) => {
-            if curved_focal {
-                x[0] = c.focal_px.ln();
-            }
             x[1] = c.roll;
             (
                 Vp2Model {
@@ -1661,6 +1613,88 @@ pub fn aggregate_with_scene(
         }
         None => (model, vp1),
     };
+    // The bootstrap's resamples: the focal lengths of trusted rays, the horizon and VP1.
+    let samples = (opts.bootstrap > 0).then(|| {
+        bootstrap(
+            &model,
+            &prep,
+            &vp1_lines,
+            p1,
+            x,
+            scene_vp1.and(scene_opts).map(|so| (scene, so)),
+            opts.bootstrap,
+            &mut rng,
+        )
+    });
+    // The focal length's cues (`super::focal`), each where its model holds: on a curved road
+    // only the curved fit (every car has its own VP2, so neither the rays nor the straight
+    // edgelet fit apply); the rays and the edges across the vehicles not where those edges
+    // are parallel in the image (a view straight down, where f cannot be observed).
+    let mut cues: Vec<Cue> = Vec::new();
+    let log_sd = |lo: f64, hi: f64, turn: f64| focal::measured_log_sd([lo, hi], turn);
+    match curved_fit {
+        Some(c) => cues.push(Cue {
+            source: "curved_edgelets",
+            likelihood: Likelihood::LogNormal {
+                focal_px: c.focal_px,
+                log_sd: log_sd(c.focal_px_p16, c.focal_px_p84, 0.0),
+            },
+        }),
+        None if !road_curved && !edges_parallel => {
+            if let Some(e) = usable.filter(|e| e.focal_usable) {
+                cues.push(Cue {
+                    source: "edgelets",
+                    likelihood: Likelihood::LogNormal {
+                        focal_px: e.focal_px,
+                        log_sd: log_sd(e.focal_px_p16, e.focal_px_p84, e.focal_bias_log_spread),
+                    },
+                });
+            }
+            if rays_trusted {
+                let fs = samples.as_ref().map_or(&[][..], |s| &s.focal_px[..]);
+                let (lo, hi) = if fs.len() >= 2 {
+                    (percentile(fs.to_vec(), 16.0), percentile(fs.to_vec(), 84.0))
+                } else {
+                    (1.0, 1.0)
+                };
+                cues.push(Cue {
+                    source: "network",
+                    likelihood: Likelihood::LogNormal {
+                        focal_px: x[0].exp(),
+                        log_sd: log_sd(lo, hi, 0.0),
+                    },
+                });
+            }
+            if let Some(l) =
+                rays.and_then(|r| rays_focal_likelihood(vp1, pp, range_px, r.fit, r.sd_deg))
+            {
+                cues.push(Cue {
+                    source: "network_rays",
+                    likelihood: l,
+                });
+            }
+        }
+        None => {}
+    }
+    let focal = focal::fuse(range_px, &cues)
+        .ok_or_else(|| not_enough(format!("invalid focal range {range_px:?} px")))?;
+    let carried = |s: &str| focal.carried_by.contains(&s);
+    let curved_focal = carried("curved_edgelets");
+    let focal_from_rays = carried("network_rays");
+    // Where f moved off the value the VP2 model held, the roll and the rays' bias are
+    // refitted with f held there (unless the edgelets set the roll).
+    let model = Vp2Model {
+        f0: focal.focal_px,
+        ..model
+    };
+    if !rays_trusted && usable.is_none() && curved_fit.is_none() {
+        x = Vp2Model {
+            fixed_ln_f: Some(focal.focal_px.ln()),
+            ..model
+        }
+        .fit(&prep.weight, Some([focal.focal_px.ln(), x[1], x[2]]));
+    }
+    x[0] = focal.focal_px.ln();
     let (h, u) = model.vp2(x[0], x[1]);
     let vp2 = vp1 + h / u;
     let calibration = Calibration::from_vps(vp1, vp2, pp)
@@ -1731,7 +1765,7 @@ pub fn aggregate_with_scene(
         edgelets: edge_fit.map_or(0, |e| e.edgelets),
         edgelet_vehicles: edge_fit.map_or(0, |e| e.vehicles),
         roll_from_edgelets: usable.is_some(),
-        focal_from_edgelets: usable.is_some_and(|e| e.focal_usable),
+        focal_from_edgelets: carried("edgelets"),
         edgelet_focal_px: edge_fit.map(|e| e.focal_px),
         edgelet_roll_sd_deg: edge_fit.map(|e| e.roll_sd_deg),
         edgelet_focal_log_spread: edge_fit.map(|e| e.focal_log_spread()),
@@ -1742,11 +1776,9 @@ pub fn aggregate_with_scene(
         rays_scatter_deg: rays.map(|r| r.scatter_deg),
         rays_vp2_sd_deg: rays.map(|r| r.sd_deg).filter(|s| s.is_finite()),
         rays_posterior_px: posterior,
-        focal_from_rays: focal_from_rays
-            && !usable.is_some_and(|e| e.focal_usable)
-            && curved_fit.is_none(),
+        focal_from_rays,
     };
-    let confidence = (opts.bootstrap > 0).then(|| {
+    let confidence = samples.and_then(|b| {
         let data_only = Vp2Model {
             fixed_bias: Some(0.0),
             roll_prior: false,
@@ -1754,77 +1786,40 @@ pub fn aggregate_with_scene(
         }
         .fit(&prep.weight, None)[0]
             .exp();
-        let (mut fs, mut angles, mut vx, mut vy) = (vec![], vec![], vec![], vec![]);
-        let q1 = from_sphere(p1);
-        for _ in 0..opts.bootstrap {
-            // One count per vehicle, shared by its boxes ([`vehicle_units`]).
-            let draws: Vec<f64> = (0..prep.units).map(|_| rng.poisson1()).collect();
-            let counts: Vec<f64> = prep.unit.iter().map(|&u| draws[u]).collect();
-            let scaled = |w: &[f64], c: &[f64]| -> Vec<f64> {
-                w.iter().zip(c).map(|(a, c)| a * c).collect()
-            };
-            let w = scaled(&prep.weight, &counts);
-            // Track lines are resampled on their own (one count per track).
-            let wv1 = if vp1_lines.from_tracks {
-                let counts1: Vec<f64> = (0..vp1_lines.weight.len())
-                    .map(|_| rng.poisson1())
-                    .collect();
-                scaled(&vp1_lines.weight, &counts1)
-            } else {
-                scaled(&vp1_lines.weight, &counts)
-            };
-            let threshold = vp1_lines.threshold_deg;
-            let Some(pb) = fit_vp1(vp1_lines.lines(), &wv1, threshold, &mut rng, Some(q1)) else {
-                continue;
-            };
-            let Some(vb) = vp1_of(pb) else { continue };
-            let mb = Vp2Model { vp1: vb, ..model };
-            let (vb, xb, _) = fit_camera(&mb, &vp1_lines, &wv1, &w, Some(x));
-            // The scene's lines do not change with the vehicles resampled: where they placed
-            // VP1, each resample's VP1 is moved by them again.
-            let vb = scene_vp1
-                .and(scene_opts)
-                .and_then(|so| scene_lines::refine_vp1(vb, scene, so))
-                .map_or(vb, |f| f.vp1);
-            let mb = Vp2Model { vp1: vb, ..model };
-            let (hb, ub) = mb.vp2(xb[0], xb[1]);
-            fs.push(xb[0].exp());
-            let vp2b = vb + hb / ub;
-            angles.push((vp2b.y - vb.y).atan2(vp2b.x - vb.x).to_degrees());
-            vx.push(vb.x);
-            vy.push(vb.y);
-        }
-        if fs.is_empty() {
+        if b.focal_px.is_empty() {
             return None;
         }
         // Horizon angles near +-180 wrap: measure them as line angles around the estimate.
         let a0 = calibration.horizon.angle().to_degrees();
-        let angles: Vec<f64> = angles
+        let angles: Vec<f64> = b
+            .horizon_deg
             .iter()
             .map(|a| line_angle_diff((a - a0).to_radians()).to_degrees())
             .collect();
-        // Where the edgelets decided, their own bootstrap is the spread (the curved-road
+        // Where the edgelets set the roll, their own bootstrap is its spread (the curved-road
         // fit's, or the straight fit's with VP1 fixed).
-        let (p16, p84) = match (
-            curved_fit.filter(|_| curved_focal),
-            usable.filter(|e| e.focal_usable),
-        ) {
-            (Some(c), _) => (c.focal_px_p16, c.focal_px_p84),
-            (None, Some(e)) => (e.focal_px_p16, e.focal_px_p84),
-            (None, None) => (percentile(fs.clone(), 16.0), percentile(fs.clone(), 84.0)),
-        };
         let horizon_sd = match (curved_fit, usable) {
             (Some(c), _) => c.roll_sd_deg,
             (None, Some(e)) => e.roll_sd_deg,
             (None, None) => sd(&angles),
         };
+        // The focal lengths' own bootstrap: that of the edgelet fit that carried f, else
+        // this one's (where f is held, as for untrusted rays, all its resamples agree).
+        let (p16, p84) = match (curved_fit.filter(|_| curved_focal), usable) {
+            (Some(c), _) => (c.focal_px_p16, c.focal_px_p84),
+            (None, Some(e)) if carried("edgelets") => (e.focal_px_p16, e.focal_px_p84),
+            _ => (
+                percentile(b.focal_px.clone(), 16.0),
+                percentile(b.focal_px.clone(), 84.0),
+            ),
+        };
         Some(Confidence {
             focal_px_p16: p16,
             focal_px_p84: p84,
             horizon_angle_sd_deg: horizon_sd,
-            vp1_sd_px: ((sd(&vx).powi(2) + sd(&vy).powi(2)) / 2.0).sqrt(),
+            vp1_sd_px: ((sd(&b.vp1_x).powi(2) + sd(&b.vp1_y).powi(2)) / 2.0).sqrt(),
             focal_px_data_only: data_only,
-            resamples: fs.len(),
+            resamples: b.focal_px.len(),
         })
     });
     Ok(RobustResult {
@@ -1832,7 +1827,75 @@ pub fn aggregate_with_scene(
         roll: x[1],
         ray_bias: x[2],
         evidence,
-        confidence: confidence.flatten(),
+        confidence,
+        focal,
         track_lines,
     })
+}
+
+/// The bootstrap's resamples ([`bootstrap`]).
+struct Samples {
+    /// The focal length, the horizon's angle (degrees) and VP1 of each resample.
+    focal_px: Vec<f64>,
+    horizon_deg: Vec<f64>,
+    vp1_x: Vec<f64>,
+    vp1_y: Vec<f64>,
+}
+
+/// Refit VP1 and the VP2 model (`x` the start) on `resamples` Poisson resamplings of the
+/// physical vehicles (one count per vehicle, shared by its boxes: [`vehicle_units`]; track
+/// lines get one count per track). Where the scene's lines placed VP1 (`scene`), each
+/// resample's VP1 is moved by them again: they do not change with the vehicles.
+#[allow(clippy::too_many_arguments)]
+fn bootstrap(
+    model: &Vp2Model,
+    prep: &Prepared,
+    vp1_lines: &Vp1Lines,
+    p1: [f64; 3],
+    x: [f64; 3],
+    scene: Option<(&[Edgelet], &SceneLineOptions)>,
+    resamples: usize,
+    rng: &mut SplitMix,
+) -> Samples {
+    let mut out = Samples {
+        focal_px: vec![],
+        horizon_deg: vec![],
+        vp1_x: vec![],
+        vp1_y: vec![],
+    };
+    let q1 = from_sphere(p1);
+    let scaled =
+        |w: &[f64], c: &[f64]| -> Vec<f64> { w.iter().zip(c).map(|(a, c)| a * c).collect() };
+    for _ in 0..resamples {
+        let draws: Vec<f64> = (0..prep.units).map(|_| rng.poisson1()).collect();
+        let counts: Vec<f64> = prep.unit.iter().map(|&u| draws[u]).collect();
+        let w = scaled(&prep.weight, &counts);
+        let wv1 = if vp1_lines.from_tracks {
+            let counts1: Vec<f64> = (0..vp1_lines.weight.len())
+                .map(|_| rng.poisson1())
+                .collect();
+            scaled(&vp1_lines.weight, &counts1)
+        } else {
+            scaled(&vp1_lines.weight, &counts)
+        };
+        let threshold = vp1_lines.threshold_deg;
+        let Some(pb) = fit_vp1(vp1_lines.lines(), &wv1, threshold, rng, Some(q1)) else {
+            continue;
+        };
+        let Some(vb) = vp1_of(pb) else { continue };
+        let mb = Vp2Model { vp1: vb, ..*model };
+        let (vb, xb, _) = fit_camera(&mb, vp1_lines, &wv1, &w, Some(x));
+        let vb = scene
+            .and_then(|(edgelets, so)| scene_lines::refine_vp1(vb, edgelets, so))
+            .map_or(vb, |f| f.vp1);
+        let mb = Vp2Model { vp1: vb, ..*model };
+        let (hb, ub) = mb.vp2(xb[0], xb[1]);
+        out.focal_px.push(xb[0].exp());
+        let vp2b = vb + hb / ub;
+        out.horizon_deg
+            .push((vp2b.y - vb.y).atan2(vp2b.x - vb.x).to_degrees());
+        out.vp1_x.push(vb.x);
+        out.vp1_y.push(vb.y);
+    }
+    out
 }
