@@ -185,6 +185,18 @@ fn posterior_weights(grid: &[f64], prior: &[f64], cues: &[&Cue]) -> Vec<f64> {
     log.iter().map(|l| (l - top).exp()).collect()
 }
 
+/// How far the posterior's grid reaches beyond the range, in `ln f`.
+const TAIL_LOG: f64 = 4.0 * PRIOR_EDGE_LOG_SD;
+
+/// The focal lengths the posterior is evaluated over, pixels: `range_px` widened by four
+/// [`PRIOR_EDGE_LOG_SD`] either side (a tabulated cue should cover them).
+pub fn support(range_px: [f64; 2]) -> [f64; 2] {
+    [
+        range_px[0] * (-TAIL_LOG).exp(),
+        range_px[1] * TAIL_LOG.exp(),
+    ]
+}
+
 /// The grid: the range widened by four [`PRIOR_EDGE_LOG_SD`] either side, `ln f` at cell
 /// centres, with the prior's log density at each (0 inside the range); and the variance of a
 /// prior uniform over the range, the information that measured evidence must match.
@@ -194,8 +206,7 @@ fn grid_of(range_px: [f64; 2]) -> Option<(Vec<f64>, Vec<f64>, f64)> {
         return None;
     }
     let (lo, hi) = (short.ln(), long.ln());
-    let tail = 4.0 * PRIOR_EDGE_LOG_SD;
-    let (a, b) = (lo - tail, hi + tail);
+    let (a, b) = (lo - TAIL_LOG, hi + TAIL_LOG);
     let grid: Vec<f64> = (0..GRID)
         .map(|i| a + (b - a) * (i as f64 + 0.5) / GRID as f64)
         .collect();

@@ -1005,7 +1005,7 @@ pub fn rays_focal_posterior(
     rays: [f64; 2],
     sd_deg: f64,
 ) -> Option<[f64; 3]> {
-    let l = rays_focal_likelihood(vp1, pp, range_px, rays, sd_deg)?;
+    let l = rays_focal_likelihood(vp1, pp, focal::support(range_px), rays, sd_deg)?;
     focal::alone(range_px, &l)
 }
 
@@ -1665,8 +1665,10 @@ pub fn aggregate_with_scene(
                     },
                 });
             }
+            // Tabulated over all of the posterior's grid, past the band's soft edges.
+            let support = focal::support(range_px);
             if let Some(l) =
-                rays.and_then(|r| rays_focal_likelihood(vp1, pp, range_px, r.fit, r.sd_deg))
+                rays.and_then(|r| rays_focal_likelihood(vp1, pp, support, r.fit, r.sd_deg))
             {
                 cues.push(Cue {
                     source: "network_rays",
@@ -1687,7 +1689,7 @@ pub fn aggregate_with_scene(
         f0: focal.focal_px,
         ..model
     };
-    if !rays_trusted && usable.is_none() && curved_fit.is_none() {
+    if focal.measured && !rays_trusted && usable.is_none() && curved_fit.is_none() {
         x = Vp2Model {
             fixed_ln_f: Some(focal.focal_px.ln()),
             ..model
