@@ -678,3 +678,41 @@ fn eval_speed_on_session0_center() {
     assert!(table.contains("session0_center"), "{table}");
     assert!(table.contains("1.89"), "{table}");
 }
+
+#[test]
+fn a_device_this_build_cannot_use_is_a_wrong_command_line() {
+    // Every command that runs the network checks --device before it starts: exit 2, the flag
+    // and the remedy named, nothing written.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let o = out.to_str().unwrap();
+    let runs: [Vec<&str>; 5] = [
+        vec!["bench-net", "--device", "tpu"],
+        vec!["predict", "x.png", "--device", "tpu"],
+        vec!["train", "-o", o, "--device", "tpu"],
+        vec!["calibrate", "x.mp4", "-o", o, "--device", "tpu"],
+        vec!["eval", "kitti", "--data", o, "--device", "tpu"],
+    ];
+    for args in &runs {
+        let r = vpcal(args);
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", stderr(&r));
+        let e = stderr(&r);
+        let first = e.lines().next().unwrap_or_default();
+        assert!(
+            first.contains("--device") && first.contains("unknown device \"tpu\""),
+            "{e}"
+        );
+    }
+    // A GPU in a build without a GPU backend says how to get one.
+    #[cfg(not(feature = "wgpu"))]
+    for name in ["wgpu", "gpu", "wgpu:1"] {
+        let r = vpcal(&["predict", "x.png", "--device", name]);
+        assert_eq!(r.status.code(), Some(2), "{}", stderr(&r));
+        assert!(
+            stderr(&r).contains("rebuild with `--features vpcal-net/wgpu`"),
+            "{}",
+            stderr(&r)
+        );
+    }
+    assert!(!out.exists());
+}

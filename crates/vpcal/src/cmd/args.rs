@@ -61,6 +61,17 @@ pub fn positive_usize(s: &str) -> Result<usize, String> {
     positive_u64(s).and_then(|v| usize::try_from(v).map_err(|e| e.to_string()))
 }
 
+/// `--device`: a device name this build can run the network on (`cpu`, or `wgpu` in builds
+/// with the `wgpu` feature), checked before the run so that a build without a GPU backend, or
+/// an unknown name, is a wrong command line (exit 2) with the remedy.
+pub fn device(s: &str) -> Result<String, String> {
+    match vpcal_net::device::select(s) {
+        Ok(_) => Ok(s.to_string()),
+        Err(vpcal_net::NetError::Config(m)) => Err(m),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -38,7 +38,7 @@ pub struct Args {
     #[arg(long, value_name = "PYTHON")]
     pub torch: Option<PathBuf>,
     /// Device for vpcal: `cpu` or `wgpu` (the PyTorch peer always runs on the CPU).
-    #[arg(long, default_value = "cpu")]
+    #[arg(long, default_value = "cpu", value_parser = super::args::device)]
     pub device: String,
     /// Print the results as JSON.
     #[arg(long)]

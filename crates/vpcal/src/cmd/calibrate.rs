@@ -126,7 +126,7 @@ pub struct PipelineArgs {
     #[arg(long, value_name = "PATH")]
     pub model: Option<PathBuf>,
     /// Device for the network: `cpu`, or `wgpu` in builds with the `wgpu` feature.
-    #[arg(long, default_value = "cpu")]
+    #[arg(long, default_value = "cpu", value_parser = super::args::device)]
     pub device: String,
     /// Crops per network batch.
     #[arg(long, default_value_t = 32, value_parser = super::args::positive_usize)]

@@ -27,7 +27,7 @@ pub struct KittiArgs {
     #[arg(long, value_name = "DIAGONALS", default_value_t = kitti::MIN_VP_DISTANCE_DIAGONALS)]
     pub edgelet_reach: f64,
     /// Device: `cpu`, or `wgpu` in builds with the `wgpu` feature.
-    #[arg(long, default_value = "cpu")]
+    #[arg(long, default_value = "cpu", value_parser = super::args::device)]
     pub device: String,
 }
 

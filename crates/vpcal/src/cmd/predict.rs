@@ -50,7 +50,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = Decode::Centre)]
     pub decode: Decode,
     /// Device: `cpu`, or `wgpu` in builds with the `wgpu` feature.
-    #[arg(long, default_value = "cpu")]
+    #[arg(long, default_value = "cpu", value_parser = super::args::device)]
     pub device: String,
 }
 

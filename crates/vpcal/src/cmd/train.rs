@@ -122,7 +122,7 @@ pub struct Args {
     #[arg(long, default_value_t = 2)]
     pub keep: usize,
     /// Device: `cpu`, or `wgpu` in builds with the `wgpu` feature.
-    #[arg(long, default_value = "cpu")]
+    #[arg(long, default_value = "cpu", value_parser = super::args::device)]
     pub device: String,
     /// No progress bar.
     #[arg(long)]
