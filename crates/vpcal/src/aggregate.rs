@@ -488,16 +488,9 @@ pub fn aggregate(
                 Some([a, b]) => format!("the given {a:.0}-{b:.0} px range"),
                 None => format!("the {}-{}° prior", TRAFFIC_FOV_DEG[0], TRAFFIC_FOV_DEG[1]),
             };
-            let what = |source: &str| match source {
-                "edgelets" => "the edges across the vehicles".to_string(),
-                "curved_edgelets" => "the curved-road fit".to_string(),
-                "network" => "the network's VP2 points and rays".to_string(),
-                "network_rays" => "the network's VP2 rays".to_string(),
-                other => other.to_string(),
-            };
             let cue_note = |c: &vpcal_geom::aggregate::focal::CueReport| {
                 let [lo, hi] = c.interval_px;
-                let what = what(c.source);
+                let what = cue_words(c.source);
                 if c.used {
                     format!(
                         "{what} {:.0} px (with the prior {lo:.0}-{hi:.0}, {:.0} % of the \
@@ -533,7 +526,7 @@ pub fn aggregate(
                     focal
                         .carried_by
                         .iter()
-                        .map(|s| what(s))
+                        .map(|s| cue_words(s))
                         .collect::<Vec<_>>()
                         .join(" and ")
                 ));
@@ -644,6 +637,17 @@ pub fn aggregate(
                 focal_range_px,
             })
         }
+    }
+}
+
+/// A focal cue's name (`evidence.focal_cues[].source`) in words.
+fn cue_words(source: &str) -> &str {
+    match source {
+        "edgelets" => "the edges across the vehicles",
+        "curved_edgelets" => "the curved-road fit",
+        "network" => "the network's VP2 points and rays",
+        "network_rays" => "the network's VP2 rays",
+        other => other,
     }
 }
 

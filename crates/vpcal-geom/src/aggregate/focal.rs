@@ -146,16 +146,14 @@ pub struct FocalPosterior {
 }
 
 /// Variance of `ln f` under weights `w` over `grid` (unnormalised).
-fn moments(grid: &[f64], w: &[f64]) -> (f64, f64) {
+fn variance(grid: &[f64], w: &[f64]) -> f64 {
     let total: f64 = w.iter().sum();
     let mean = grid.iter().zip(w).map(|(x, w)| x * w).sum::<f64>() / total;
-    let var = grid
-        .iter()
+    grid.iter()
         .zip(w)
         .map(|(x, w)| (x - mean) * (x - mean) * w)
         .sum::<f64>()
-        / total;
-    (mean, var)
+        / total
 }
 
 fn quantiles(grid: &[f64], w: &[f64]) -> [f64; 3] {
@@ -201,17 +199,19 @@ pub fn support(range_px: [f64; 2]) -> [f64; 2] {
 /// centres, with the prior's log density at each (0 inside the range); and the variance of a
 /// prior uniform over the range, the information that measured evidence must match.
 fn grid_of(range_px: [f64; 2]) -> Option<(Vec<f64>, Vec<f64>, f64)> {
-    let [short, long] = range_px;
-    if !(short > 0.0 && long > short && long.is_finite()) {
-        return None;
-    }
-    let (lo, hi) = (short.ln(), long.ln());
+    let (lo, hi) = log_range(range_px)?;
     let (a, b) = (lo - TAIL_LOG, hi + TAIL_LOG);
     let grid: Vec<f64> = (0..GRID)
         .map(|i| a + (b - a) * (i as f64 + 0.5) / GRID as f64)
         .collect();
     let prior = grid.iter().map(|&x| prior_log_density(lo, hi, x)).collect();
     Some((grid, prior, (hi - lo).powi(2) / 12.0))
+}
+
+/// `(ln short, ln long)` of a valid range `[short, long]` (pixels, `0 < short < long`).
+fn log_range(range_px: [f64; 2]) -> Option<(f64, f64)> {
+    let [short, long] = range_px;
+    (short > 0.0 && long > short && long.is_finite()).then(|| (short.ln(), long.ln()))
 }
 
 fn prior_log_density(lo: f64, hi: f64, x: f64) -> f64 {
@@ -223,11 +223,7 @@ fn prior_log_density(lo: f64, hi: f64, x: f64) -> f64 {
 /// 84th percentiles of a distribution uniform in `ln f` over `range_px`, the band itself
 /// without the soft edges that let evidence carry `f` beyond it ([`PRIOR_EDGE_LOG_SD`]).
 pub fn prior_percentiles(range_px: [f64; 2]) -> Option<[f64; 3]> {
-    let [short, long] = range_px;
-    if !(short > 0.0 && long > short && long.is_finite()) {
-        return None;
-    }
-    let (lo, hi) = (short.ln(), long.ln());
+    let (lo, hi) = log_range(range_px)?;
     Some([0.16, 0.5, 0.84].map(|q| (lo + q * (hi - lo)).exp()))
 }
 
@@ -245,23 +241,23 @@ pub fn alone(range_px: [f64; 2], likelihood: &Likelihood) -> Option<[f64; 3]> {
 /// pixels) and `cues`. `None` for an invalid range.
 pub fn fuse(range_px: [f64; 2], cues: &[Cue]) -> Option<FocalPosterior> {
     let (grid, prior, prior_var) = grid_of(range_px)?;
-    let [short, long] = range_px;
-    let (lo, hi) = (short.ln(), long.ln());
+    let (lo, hi) = log_range(range_px)?;
     // A cue whose own focal length lies outside the range contradicts the prior when its
     // likelihood at the range's nearer end is below that of CONFLICT_SD standard errors; a
     // tabulated one as soon as its peak lies outside (its table need not say how far).
     let conflicting = |c: &Cue| {
-        let own = c.likelihood.own_px();
-        let end = if own < short {
+        let own = c.likelihood.own_px().ln();
+        let end = if own < lo {
             lo
-        } else if own > long {
+        } else if own > hi {
             hi
         } else {
             return !own.is_finite();
         };
+        let at_end = c.likelihood.at(end);
         matches!(c.likelihood, Likelihood::Table { .. })
-            || c.likelihood.at(end).is_nan()
-            || c.likelihood.at(end) < -0.5 * CONFLICT_SD * CONFLICT_SD
+            || at_end.is_nan()
+            || at_end < -0.5 * CONFLICT_SD * CONFLICT_SD
     };
     // Each cue alone with the prior: its interval; and its own information on ln f (the
     // precision of its likelihood, not of the prior it is cut by: a weak cue pointing past the
@@ -273,8 +269,7 @@ pub fn fuse(range_px: [f64; 2], cues: &[Cue]) -> Option<FocalPosterior> {
                 Likelihood::LogNormal { log_sd, .. } => 1.0 / (log_sd * log_sd).max(1e-12),
                 Likelihood::Table { .. } => {
                     let flat = vec![0.0; grid.len()];
-                    let (_, var) = moments(&grid, &posterior_weights(&grid, &flat, &[c]));
-                    1.0 / var.max(1e-12)
+                    1.0 / variance(&grid, &posterior_weights(&grid, &flat, &[c])).max(1e-12)
                 }
             };
             (

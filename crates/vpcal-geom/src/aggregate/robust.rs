@@ -1069,7 +1069,7 @@ pub fn rays_focal_likelihood(
 }
 
 /// What the VP2 rays alone say about the focal length.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct RaysFocal {
     /// Their own fit, `(ln f, roll)`.
     fit: [f64; 2],
@@ -1077,7 +1077,10 @@ struct RaysFocal {
     /// taken for their VP2 from it, degrees.
     scatter_deg: f64,
     sd_deg: f64,
-    /// [`rays_focal_posterior`]'s percentiles.
+    /// Their likelihood of `ln f` ([`rays_focal_likelihood`], tabulated over all of the
+    /// focal posterior's grid, past the band's soft edges), and its percentiles with the
+    /// prior alone ([`rays_focal_posterior`]).
+    likelihood: Option<Likelihood>,
     posterior: Option<[f64; 3]>,
 }
 
@@ -1106,14 +1109,17 @@ fn rays_focal(model: &Vp2Model, w: &[f64], range_px: [f64; 2]) -> RaysFocal {
         .unzip();
     let scatter = crate::metrics::weighted_median(&angles, &weights).unwrap_or(f64::NAN);
     let sd = RAY_SYSTEMATIC_PER_SCATTER * scatter.max(RAY_MIN_SCATTER_DEG);
-    let posterior = scatter
+    let support = focal::support(range_px);
+    let likelihood = scatter
         .is_finite()
-        .then(|| rays_focal_posterior(model.vp1, model.pp, range_px, [x[0], x[1]], sd))
+        .then(|| rays_focal_likelihood(model.vp1, model.pp, support, [x[0], x[1]], sd))
         .flatten();
+    let posterior = likelihood.as_ref().and_then(|l| focal::alone(range_px, l));
     RaysFocal {
         fit: [x[0], x[1]],
         scatter_deg: scatter,
         sd_deg: sd,
+        likelihood,
         posterior,
     }
 }
@@ -1569,7 +1575,7 @@ pub fn aggregate_with_scene(
     // likelihood over ln f (`rays_focal_likelihood`) is one cue of the focal posterior.
     let range_px = focal_prior_range_widths(opts.focal_range_widths).map(|r| r * width);
     let rays = (!rays_trusted).then(|| rays_focal(&model, &prep.weight, range_px));
-    let posterior = rays.and_then(|r| r.posterior);
+    let posterior = rays.as_ref().and_then(|r| r.posterior);
     // The edges across the vehicles, where they say those edges are parallel in the image
     // (a view looking almost straight down), contradict rays that place VP2 near.
     let edge_fit = edge_opts.and_then(|eo| edge::fit(vp1, pp, width, &boxes, x[1], eo, opts.seed));
@@ -1631,13 +1637,12 @@ pub fn aggregate_with_scene(
     // edgelet fit apply); the rays and the edges across the vehicles not where those edges
     // are parallel in the image (a view straight down, where f cannot be observed).
     let mut cues: Vec<Cue> = Vec::new();
-    let log_sd = |lo: f64, hi: f64, turn: f64| focal::measured_log_sd([lo, hi], turn);
     match curved_fit {
         Some(c) => cues.push(Cue {
             source: "curved_edgelets",
             likelihood: Likelihood::LogNormal {
                 focal_px: c.focal_px,
-                log_sd: log_sd(c.focal_px_p16, c.focal_px_p84, 0.0),
+                log_sd: focal::measured_log_sd([c.focal_px_p16, c.focal_px_p84], 0.0),
             },
         }),
         None if !road_curved && !edges_parallel => {
@@ -1646,7 +1651,10 @@ pub fn aggregate_with_scene(
                     source: "edgelets",
                     likelihood: Likelihood::LogNormal {
                         focal_px: e.focal_px,
-                        log_sd: log_sd(e.focal_px_p16, e.focal_px_p84, e.focal_bias_log_spread),
+                        log_sd: focal::measured_log_sd(
+                            [e.focal_px_p16, e.focal_px_p84],
+                            e.focal_bias_log_spread,
+                        ),
                     },
                 });
             }
@@ -1661,15 +1669,11 @@ pub fn aggregate_with_scene(
                     source: "network",
                     likelihood: Likelihood::LogNormal {
                         focal_px: x[0].exp(),
-                        log_sd: log_sd(lo, hi, 0.0),
+                        log_sd: focal::measured_log_sd([lo, hi], 0.0),
                     },
                 });
             }
-            // Tabulated over all of the posterior's grid, past the band's soft edges.
-            let support = focal::support(range_px);
-            if let Some(l) =
-                rays.and_then(|r| rays_focal_likelihood(vp1, pp, support, r.fit, r.sd_deg))
-            {
+            if let Some(l) = rays.as_ref().and_then(|r| r.likelihood.clone()) {
                 cues.push(Cue {
                     source: "network_rays",
                     likelihood: l,
@@ -1774,9 +1778,9 @@ pub fn aggregate_with_scene(
         edgelet_vp2_widths: edge_fit.map(|e| (e.vp2 - pp).norm() / width),
         edgelet_focal_bias_log_spread: edge_fit.map(|e| e.focal_bias_log_spread),
         size_slope: sizes.map(|s| s.slope),
-        rays_focal_px: rays.map(|r| r.fit[0].exp()),
-        rays_scatter_deg: rays.map(|r| r.scatter_deg),
-        rays_vp2_sd_deg: rays.map(|r| r.sd_deg).filter(|s| s.is_finite()),
+        rays_focal_px: rays.as_ref().map(|r| r.fit[0].exp()),
+        rays_scatter_deg: rays.as_ref().map(|r| r.scatter_deg),
+        rays_vp2_sd_deg: rays.as_ref().map(|r| r.sd_deg).filter(|s| s.is_finite()),
         rays_posterior_px: posterior,
         focal_from_rays,
     };
