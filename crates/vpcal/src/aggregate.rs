@@ -507,7 +507,7 @@ pub fn aggregate(
             };
             let cues: Vec<String> = focal.cues.iter().map(cue_note).collect();
             let cues = if cues.is_empty() {
-                "no cue".to_string()
+                "no cue applies".to_string()
             } else {
                 cues.join(", ")
             };
