@@ -186,6 +186,58 @@ fn a_track_on_a_curve_bends_significantly_and_a_noisy_straight_one_does_not() {
 }
 
 #[test]
+fn far_small_boxes_and_boxes_cut_by_the_frame_do_not_bend_a_straight_track() {
+    let vp = Point2::new(900.0, -100.0);
+    let track: Vec<usize> = (0..40).collect();
+    // A car receding along a straight lane (40 boxes, 60 px half width shrinking to 13 px).
+    let straight: Vec<(f64, BoxPx)> = (0..40)
+        .map(|k| {
+            (
+                k as f64,
+                receding(vp, Point2::new(400.0, 900.0), 60.0, 3 * k),
+            )
+        })
+        .collect();
+    // Far away (boxes under a third of the nearest one's height) the detector's box slides
+    // sideways with the traffic around it: up to 12 px over the last boxes.
+    let drifting: Vec<(f64, BoxPx)> = straight
+        .iter()
+        .map(|&(f, b)| {
+            let shrink = b.height() / straight[0].1.height();
+            let slide = if shrink < 0.3 {
+                12.0 * (0.3 - shrink) / 0.1
+            } else {
+                0.0
+            };
+            (f, BoxPx::new(b.x0 + slide, b.y0, b.x1 + slide, b.y1))
+        })
+        .collect();
+    let opts = TrackOptions::default();
+    let line = fit_line(&drifting, &track, &opts).unwrap();
+    assert!(line.bend_t.abs() < 4.0, "{line:?}");
+    // A car coming nearer in a lane that leaves the frame at its left edge: its nearest boxes
+    // are cut there, and their centres move right, across the track.
+    let approaching: Vec<(f64, BoxPx)> = (0..40)
+        .map(|k| {
+            let g = 0.3 + 0.6 * k as f64 / 39.0;
+            let b = box_at(vp + (Point2::new(-200.0, 1100.0) - vp) * g, 80.0 * g);
+            (
+                k as f64,
+                BoxPx::new(b.x0.max(0.0), b.y0, b.x1, b.y1.min(1080.0)),
+            )
+        })
+        .collect();
+    let unframed = fit_line(&approaching, &track, &opts).unwrap();
+    assert!(unframed.bend_t.abs() > 4.0, "{unframed:?}");
+    let framed = TrackOptions {
+        frame: Some([1920.0, 1080.0]),
+        ..opts.clone()
+    };
+    let line = fit_line(&approaching, &track, &framed).unwrap();
+    assert!(line.bend_t.abs() < 4.0, "{line:?}");
+}
+
+#[test]
 fn a_tangent_knows_its_error_from_the_boxes_jitter() {
     // One car, 30 boxes 10 px apart along x; exact centres, then centres jittering 2 px up and
     // down. The window (4 boxes either side: 9 centres, RMS spread 25.8 px along the axis)

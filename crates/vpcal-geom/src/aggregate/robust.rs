@@ -191,7 +191,10 @@ pub struct RobustOptions {
     /// `curved_share` of the qualifying tracks bend the same way, significantly (t-statistic
     /// above `curved_bend_t`, [`TrackLine::bend_t`]) and by more than `curved_bend_deg`
     /// ([`TrackLine::bend_deg`]): on a curve every car has its own heading, so lines fitted to
-    /// whole tracks miss VP1 and the horizon (`evidence.curved_tracks`). Exact boxes of cars
+    /// whole tracks miss VP1 and the horizon (`evidence.curved_tracks`). A track's bend is read
+    /// from its boxes that the picture's edge does not cut and that are at least a third of its
+    /// tallest box (`tracks::BEND_BORDER_PX`, `tracks::BEND_MIN_HEIGHT_SHARE`): cut boxes and
+    /// far, tiny ones move their centres sideways on straight roads too. Exact boxes of cars
     /// on a straight road bend a little too (a box's centre is not a fixed point of the car),
     /// significantly but by less than a degree or two on the synthetic suite.
     pub curved_bend_t: f64,
@@ -1440,6 +1443,7 @@ pub fn aggregate_with_scene(
         Some(t) => {
             let any_shape = TrackOptions {
                 max_rms_fraction: f64::INFINITY,
+                frame: Some([width, height]),
                 ..t.clone()
             };
             let moving: Vec<TrackLine> = links
