@@ -184,9 +184,10 @@ fn frozen_encoder_network_learns_checkpoints_and_loads_for_inference() {
 }
 
 #[test]
-fn bundled_hourglass_checkpoint_still_loads_as_the_hourglass() {
+fn the_previous_bundled_hourglass_still_loads_as_the_hourglass() {
+    // Written before encoders existed (no `encoder` in its config): it must still load.
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../models/default/model.safetensors");
+        .join("../../models/hourglass_small/model.safetensors");
     let net = VpNet::load(&path, &Device::flex()).unwrap();
     assert_eq!(net.model().kind(), "stacked_hourglass");
     assert_eq!(net.config().encoder, vpcal_net::Encoder::Hourglass);
