@@ -260,4 +260,39 @@ mod yolox {
         );
         assert!(tiled.name().contains("tiles"));
     }
+
+    #[test]
+    fn frames_detected_together_give_what_they_give_one_by_one() {
+        let Some(data) = data_dir() else { return };
+        let frames: Vec<Frame> = ["session0_center", "session1_left", "session2_right"]
+            .iter()
+            .enumerate()
+            .map(|(i, v)| Frame {
+                index: i as u64,
+                time_s: i as f64,
+                image: image::open(data.join(format!("bcs/dataset/{v}/screen.png")))
+                    .unwrap()
+                    .to_rgb8(),
+            })
+            .collect();
+        for rotation in [false, true] {
+            let config = YoloxConfig {
+                tiles: 2,
+                tile_rotation: rotation,
+                ..YoloxConfig::default()
+            };
+            let mut one = YoloxDetector::bundled(config.clone()).unwrap();
+            let mut together = YoloxDetector::bundled(config).unwrap();
+            assert_eq!(together.batch_frames(), 2);
+            let single: Vec<Vec<Detection>> =
+                frames.iter().map(|f| one.detect(f).unwrap()).collect();
+            let batched: Vec<Vec<Detection>> = together
+                .detect_batch(&frames)
+                .into_iter()
+                .map(|r| r.unwrap())
+                .collect();
+            assert!(single.iter().all(|d| !d.is_empty()));
+            assert_eq!(single, batched, "tile rotation {rotation}");
+        }
+    }
 }

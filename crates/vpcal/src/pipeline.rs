@@ -24,6 +24,7 @@ use vpcal_geom::{BoxPx, Point2};
 use vpcal_net::VpNet;
 use vpcal_video::background::{scene_edgelet_options, scene_edgelets, BackgroundSampler};
 use vpcal_video::crop::{integer_box, CropFilter, CropResizer};
+use vpcal_video::detect::Detection;
 use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
 use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
 use vpcal_video::{Detector, Frame, FrameSource, SourceInfo, SourceKind, SourceOptions};
@@ -576,8 +577,20 @@ impl<'a> Stages<'a> {
         let dets = detector
             .detect(frame)
             .with_context(|| format!("detecting vehicles in frame {}", frame.index))?;
-        self.stats.detections += dets.len() as u64;
         self.stats.stages.detect += t.elapsed().as_secs_f64();
+        self.detected(frame, dets, filter, planner)
+    }
+
+    /// Filter and crop the vehicles `dets` the detector found in `frame`; full batches go
+    /// through the network.
+    fn detected(
+        &mut self,
+        frame: &Frame,
+        dets: Vec<Detection>,
+        filter: &mut FrameFilter,
+        planner: Option<&mut CropPlanner>,
+    ) -> Result<()> {
+        self.stats.detections += dets.len() as u64;
         let t = Instant::now();
         let filtered = filter.apply(frame, dets);
         self.stats.stages.filter += t.elapsed().as_secs_f64();
@@ -801,39 +814,118 @@ pub fn run_pipeline_on(
             vehicle_boxes: s.crops,
         });
     };
-    loop {
-        let t = Instant::now();
-        let Some(frame) = source.next() else { break };
-        stages.stats.stages.decode += t.elapsed().as_secs_f64();
-        let frame = match frame {
-            Ok(f) => f,
-            // A damaged or truncated input keeps the frames it gave.
-            Err(e) if stages.stats.frames > 0 => {
-                warnings.push(format!(
-                    "{}: stopped reading after {} frames: {e}; the frames before it are used",
-                    input.display(),
-                    stages.stats.frames
-                ));
-                break;
+    // The detector runs one frame ahead in a thread of its own: while it looks at frame k+1,
+    // this thread decodes the next frame and sends frame k's vehicles through the filter, the
+    // network and the edgelets. (A learned detector spreads a frame's regions over the cores;
+    // with three regions on two cores one core idles for the last, and the rest of the
+    // pipeline fills it.) Frames are detected and processed in stream order, as before.
+    // A detector that gains from several frames at a time ([`Detector::batch_frames`]) gets
+    // them: up to that many frames wait for it, and twice that many are in flight.
+    let batch = detector.batch_frames().max(1);
+    let (main, detector) = std::thread::scope(|scope| {
+        let (to_detector, frames_in) = std::sync::mpsc::sync_channel::<Frame>(batch);
+        let (detections_out, from_detector) = std::sync::mpsc::sync_channel::<Detected>(batch);
+        let worker = scope.spawn(move || {
+            while let Ok(first) = frames_in.recv() {
+                let mut frames = vec![first];
+                while frames.len() < batch {
+                    match frames_in.try_recv() {
+                        Ok(f) => frames.push(f),
+                        Err(_) => break,
+                    }
+                }
+                let t = Instant::now();
+                let results = if frames.len() == 1 {
+                    vec![detector.detect(&frames[0])]
+                } else {
+                    detector.detect_batch(&frames)
+                };
+                let seconds = t.elapsed().as_secs_f64() / frames.len() as f64;
+                let learned_until = detector.learned_until();
+                for (frame, dets) in frames.into_iter().zip(results) {
+                    let out = Detected {
+                        frame,
+                        dets,
+                        seconds,
+                        learned_until,
+                    };
+                    if detections_out.send(out).is_err() {
+                        return detector;
+                    }
+                }
             }
-            Err(e) => return Err(e).with_context(|| format!("reading {}", input.display())),
-        };
-        stages.stats.frames += 1;
-        if config.edgelets {
-            let t = Instant::now();
-            background.push(&frame.image);
-            stages.stats.stages.background += t.elapsed().as_secs_f64();
-        }
-        stages.frame(&frame, detector.as_mut(), &mut filter, planner.as_mut())?;
-        if detector
-            .learned_until()
-            .is_none_or(|until| frame.index < until)
-        {
-            learning_frames += 1;
-        }
-        report(&stages);
-        last_frame = Some(frame.image);
-    }
+            detector
+        });
+        let main = (|| -> Result<()> {
+            let mut in_flight = 0usize;
+            let mut ended = false;
+            loop {
+                if !ended {
+                    let t = Instant::now();
+                    let next = source.next();
+                    stages.stats.stages.decode += t.elapsed().as_secs_f64();
+                    match next {
+                        None => ended = true,
+                        Some(Ok(frame)) => {
+                            stages.stats.frames += 1;
+                            if config.edgelets {
+                                let t = Instant::now();
+                                background.push(&frame.image);
+                                stages.stats.stages.background += t.elapsed().as_secs_f64();
+                            }
+                            if to_detector.send(frame).is_err() {
+                                bail!("the vehicle detector stopped");
+                            }
+                            in_flight += 1;
+                        }
+                        // A damaged or truncated input keeps the frames it gave.
+                        Some(Err(e)) if stages.stats.frames > 0 => {
+                            warnings.push(format!(
+                                "{}: stopped reading after {} frames: {e}; the frames before \
+                                 it are used",
+                                input.display(),
+                                stages.stats.frames
+                            ));
+                            ended = true;
+                        }
+                        Some(Err(e)) => {
+                            return Err(e).with_context(|| format!("reading {}", input.display()))
+                        }
+                    }
+                }
+                if in_flight == 0 {
+                    return Ok(());
+                }
+                if in_flight < 2 * batch && !ended {
+                    continue;
+                }
+                let Ok(d) = from_detector.recv() else {
+                    bail!("the vehicle detector stopped");
+                };
+                in_flight -= 1;
+                stages.stats.stages.detect += d.seconds;
+                let index = d.frame.index;
+                let dets = d
+                    .dets
+                    .with_context(|| format!("detecting vehicles in frame {index}"))?;
+                stages.detected(&d.frame, dets, &mut filter, planner.as_mut())?;
+                if d.learned_until.is_none_or(|until| index < until) {
+                    learning_frames += 1;
+                }
+                report(&stages);
+                last_frame = Some(d.frame.image);
+            }
+        })();
+        // Closing both channels ends the detector's loop, whether it waits for a frame or
+        // to hand one back.
+        drop(to_detector);
+        drop(from_detector);
+        (main, worker.join())
+    });
+    main?;
+    let Ok(detector) = detector else {
+        bail!("the vehicle detector's thread panicked");
+    };
     for w in source.warnings() {
         warnings.push(format!("{}: {w}", input.display()));
     }
@@ -898,6 +990,15 @@ pub fn run_pipeline_on(
         scene_edgelets,
         warnings,
     })
+}
+
+/// One frame back from the detector's thread, with what the detector found in it.
+struct Detected {
+    frame: Frame,
+    dets: vpcal_video::Result<Vec<Detection>>,
+    seconds: f64,
+    /// [`Detector::learned_until`] after this frame.
+    learned_until: Option<u64>,
 }
 
 /// The network's VPs for one vehicle box of a picture (see [`predict_boxes`]).

@@ -44,6 +44,20 @@ pub trait Detector: Send {
     /// Detector-specific: a frame of the wrong size, a failed model run.
     fn detect(&mut self, frame: &Frame) -> Result<Vec<Detection>>;
 
+    /// The vehicles in each of `frames` (consecutive frames, in stream order), one result per
+    /// frame: the same as calling [`Detector::detect`] on each in turn, which is what this
+    /// default does. A detector whose work per frame splits into independent runs spreads the
+    /// runs of all the frames over the cores.
+    fn detect_batch(&mut self, frames: &[Frame]) -> Vec<Result<Vec<Detection>>> {
+        frames.iter().map(|f| self.detect(f)).collect()
+    }
+
+    /// How many consecutive frames [`Detector::detect_batch`] is best given at a time (1: it
+    /// gains nothing from more).
+    fn batch_frames(&self) -> usize {
+        1
+    }
+
     /// A short name for logs and for the settings recorded with results.
     fn name(&self) -> String;
 

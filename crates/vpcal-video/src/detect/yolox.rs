@@ -645,27 +645,59 @@ fn cores() -> usize {
         .max(1)
 }
 
-impl Detector for YoloxDetector {
-    fn detect(&mut self, frame: &Frame) -> Result<Vec<Detection>> {
-        let (w, h) = frame.image.dimensions();
-        let mut regions = self.regions(w, h);
+impl YoloxDetector {
+    /// The regions of the next frame, `width × height`: all of them, or with
+    /// `tile_rotation` the whole frame and one tile in turn.
+    fn next_regions(&mut self, width: u32, height: u32) -> Vec<Region> {
+        let mut regions = self.regions(width, height);
         if self.config.tile_rotation && regions.len() > 2 {
             let tile = 1 + (self.frames_seen % (regions.len() as u64 - 1)) as usize;
             regions = vec![regions[0], regions[tile]];
         }
         self.frames_seen += 1;
+        regions
+    }
+}
+
+impl Detector for YoloxDetector {
+    fn detect(&mut self, frame: &Frame) -> Result<Vec<Detection>> {
+        self.detect_batch(std::slice::from_ref(frame))
+            .pop()
+            .unwrap_or_else(|| Err(self.error("no result for the frame".into())))
+    }
+
+    /// Two: a frame's regions (the whole frame and the tiles: three by default) rarely divide
+    /// evenly over two cores, two frames' regions fill them better.
+    fn batch_frames(&self) -> usize {
+        2
+    }
+
+    fn detect_batch(&mut self, frames: &[Frame]) -> Vec<Result<Vec<Detection>>> {
+        let work: Vec<(usize, Region)> = frames
+            .iter()
+            .enumerate()
+            .flat_map(|(f, frame)| {
+                let (w, h) = frame.image.dimensions();
+                self.next_regions(w, h)
+                    .into_iter()
+                    .map(move |r| (f, r))
+                    .collect::<Vec<_>>()
+            })
+            .collect();
         let this = &*self;
         // The regions are independent model runs (tract runs each on one thread): spread
-        // them over the cores, in a fixed assignment so that the result does not depend on
-        // timing. (tract's multithreaded matrix products did not pay here: one region on two
-        // cores ran at 0.92x, three regions one after another at 0.74x of this; most of the
-        // model's time is in depthwise convolutions and small products.)
-        let threads = cores().clamp(1, regions.len().max(1));
-        let mut passes: Vec<Option<Result<Pass>>> = (0..regions.len()).map(|_| None).collect();
+        // those of all the frames over the cores, in a fixed assignment so that the result
+        // does not depend on timing. Three regions of one frame on two cores leave one core
+        // idle for the third; two frames' six fill both. (tract's multithreaded matrix
+        // products did not pay here: one region on two cores ran at 0.92x, three regions one
+        // after another at 0.74x of this; most of the model's time is in depthwise
+        // convolutions and small products.)
+        let threads = cores().clamp(1, work.len().max(1));
+        let mut passes: Vec<Option<Result<Pass>>> = (0..work.len()).map(|_| None).collect();
         std::thread::scope(|s| {
             let handles: Vec<_> = (0..threads)
                 .map(|t| {
-                    let mine: Vec<(usize, Region)> = regions
+                    let mine: Vec<(usize, (usize, Region))> = work
                         .iter()
                         .copied()
                         .enumerate()
@@ -673,7 +705,7 @@ impl Detector for YoloxDetector {
                         .collect();
                     s.spawn(move || {
                         mine.into_iter()
-                            .map(|(i, r)| (i, this.candidates(&frame.image, r)))
+                            .map(|(i, (f, r))| (i, this.candidates(&frames[f].image, r)))
                             .collect::<Vec<_>>()
                     })
                 })
@@ -684,16 +716,27 @@ impl Detector for YoloxDetector {
                 }
             }
         });
-        let passes = passes
-            .into_iter()
-            .map(|p| p.unwrap_or_else(|| Err(self.error("a detector thread panicked".into()))))
-            .collect::<Result<Vec<Pass>>>()?;
-        Ok(merge_passes(
-            passes,
-            (w, h),
-            self.config.nms_iou,
-            self.config.max_detections,
-        ))
+        let mut per_frame: Vec<Result<Vec<Pass>>> = frames.iter().map(|_| Ok(Vec::new())).collect();
+        for ((f, _), pass) in work.iter().zip(passes) {
+            let pass = pass.unwrap_or_else(|| Err(self.error("a detector thread panicked".into())));
+            match (&mut per_frame[*f], pass) {
+                (Ok(list), Ok(p)) => list.push(p),
+                (slot @ Ok(_), Err(e)) => *slot = Err(e),
+                (Err(_), _) => {}
+            }
+        }
+        frames
+            .iter()
+            .zip(per_frame)
+            .map(|(frame, passes)| {
+                Ok(merge_passes(
+                    passes?,
+                    frame.image.dimensions(),
+                    self.config.nms_iou,
+                    self.config.max_detections,
+                ))
+            })
+            .collect()
     }
 
     fn name(&self) -> String {
