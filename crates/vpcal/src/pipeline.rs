@@ -858,6 +858,7 @@ pub fn run_pipeline_on(
         });
         let main = (|| -> Result<()> {
             let mut in_flight = 0usize;
+            let mut read = 0u64;
             let mut ended = false;
             loop {
                 if !ended {
@@ -867,7 +868,7 @@ pub fn run_pipeline_on(
                     match next {
                         None => ended = true,
                         Some(Ok(frame)) => {
-                            stages.stats.frames += 1;
+                            read += 1;
                             if config.edgelets {
                                 let t = Instant::now();
                                 background.push(&frame.image);
@@ -879,12 +880,11 @@ pub fn run_pipeline_on(
                             in_flight += 1;
                         }
                         // A damaged or truncated input keeps the frames it gave.
-                        Some(Err(e)) if stages.stats.frames > 0 => {
+                        Some(Err(e)) if read > 0 => {
                             warnings.push(format!(
-                                "{}: stopped reading after {} frames: {e}; the frames before \
-                                 it are used",
+                                "{}: stopped reading after {read} frames: {e}; the frames \
+                                 before it are used",
                                 input.display(),
-                                stages.stats.frames
                             ));
                             ended = true;
                         }
@@ -903,6 +903,8 @@ pub fn run_pipeline_on(
                     bail!("the vehicle detector stopped");
                 };
                 in_flight -= 1;
+                // Counted when processed, so that progress reports frames done.
+                stages.stats.frames += 1;
                 stages.stats.stages.detect += d.seconds;
                 let index = d.frame.index;
                 let dets = d
