@@ -814,13 +814,12 @@ pub fn run_pipeline_on(
             vehicle_boxes: s.crops,
         });
     };
-    // The detector runs one frame ahead in a thread of its own: while it looks at frame k+1,
-    // this thread decodes the next frame and sends frame k's vehicles through the filter, the
-    // network and the edgelets. (A learned detector spreads a frame's regions over the cores;
-    // with three regions on two cores one core idles for the last, and the rest of the
-    // pipeline fills it.) Frames are detected and processed in stream order, as before.
-    // A detector that gains from several frames at a time ([`Detector::batch_frames`]) gets
-    // them: up to that many frames wait for it, and twice that many are in flight.
+    // The detector runs ahead in a thread of its own: while it looks at the next frames, this
+    // thread decodes and sends the frames it has finished through the filter, the network and
+    // the edgelets, which fill the core a learned detector leaves idle when its regions do not
+    // divide evenly over the cores. A detector that gains from several frames at a time
+    // ([`Detector::batch_frames`]) gets them: up to that many frames wait for it, and twice
+    // that many are in flight. Frames are detected and processed in stream order, as before.
     let batch = detector.batch_frames().max(1);
     let (main, detector) = std::thread::scope(|scope| {
         let (to_detector, frames_in) = std::sync::mpsc::sync_channel::<Frame>(batch);
