@@ -508,11 +508,20 @@ impl FrameSource for FfmpegSource {
         &self.info
     }
 
+    /// FFmpeg's messages about the input, each once, without the memory addresses and the
+    /// path they start with (the caller names the input).
     fn warnings(&self) -> Vec<String> {
-        self.stderr_log
-            .lock()
-            .map(|l| l.lines.iter().cloned().collect())
-            .unwrap_or_default()
+        let Ok(log) = self.stderr_log.lock() else {
+            return Vec::new();
+        };
+        let mut seen: Vec<String> = Vec::new();
+        for line in &log.lines {
+            let line = strip_path_prefix(line, &self.info.path);
+            if !line.is_empty() && !seen.contains(&line) {
+                seen.push(line);
+            }
+        }
+        seen
     }
 }
 
