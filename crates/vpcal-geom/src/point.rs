@@ -222,6 +222,16 @@ impl BoxPx {
         self.y1 - self.y0
     }
 
+    /// True when the box keeps at least `margin` pixels from every edge of a `width × height`
+    /// picture: a box nearer an edge is cut by it, and its centre and size are not the
+    /// vehicle's.
+    pub fn clear_of_edges(&self, width: f64, height: f64, margin: f64) -> bool {
+        self.x0 >= margin
+            && self.y0 >= margin
+            && self.x1 <= width - margin
+            && self.y1 <= height - margin
+    }
+
     /// True when the box has positive finite width and height.
     pub fn is_valid(&self) -> bool {
         [self.x0, self.y0, self.x1, self.y1]

@@ -233,11 +233,7 @@ pub fn scale_from_vehicles(
         if !bb.is_valid() {
             continue;
         }
-        if bb.x0 < BORDER_PX
-            || bb.y0 < BORDER_PX
-            || bb.x1 > width - BORDER_PX
-            || bb.y1 > height - BORDER_PX
-        {
+        if !bb.clear_of_edges(width, height, BORDER_PX) {
             rejected_border += 1;
             continue;
         }

@@ -193,7 +193,7 @@ pub struct RobustOptions {
     /// ([`TrackLine::bend_deg`]): on a curve every car has its own heading, so lines fitted to
     /// whole tracks miss VP1 and the horizon (`evidence.curved_tracks`). A track's bend is read
     /// from its boxes that the picture's edge does not cut and that are at least a third of its
-    /// tallest box (`tracks::BEND_BORDER_PX`, `tracks::BEND_MIN_HEIGHT_SHARE`): cut boxes and
+    /// tallest box (`vehicle_scale::BORDER_PX`, `tracks::BEND_MIN_HEIGHT_SHARE`): cut boxes and
     /// far, tiny ones move their centres sideways on straight roads too. Exact boxes of cars
     /// on a straight road bend a little too (a box's centre is not a fixed point of the car),
     /// significantly but by less than a degree or two on the synthetic suite.

@@ -51,12 +51,7 @@ pub fn size_slope(
     height: f64,
 ) -> Option<SizeSlope> {
     let line = horizon.normalized()?;
-    let inside = |b: &&BoxPx| {
-        b.x0 >= BORDER_PX
-            && b.y0 >= BORDER_PX
-            && b.x1 <= width - BORDER_PX
-            && b.y1 <= height - BORDER_PX
-    };
+    let inside = |b: &&BoxPx| b.clear_of_edges(width, height, BORDER_PX);
     let raw: Vec<(f64, f64, f64)> = boxes
         .iter()
         .zip(weights)

@@ -13,6 +13,7 @@
 //! travelled far enough and stayed straight.
 
 use crate::point::{BoxPx, Point2};
+use crate::vehicle_scale::BORDER_PX;
 
 /// Settings of the tracker and of the line fit.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -33,17 +34,12 @@ pub struct TrackOptions {
     /// ... and the RMS distance of its centres from the line must stay below this fraction of
     /// the travel (a turning vehicle is no evidence of VP1).
     pub max_rms_fraction: f64,
-    /// The picture's size `[width, height]`, where known: boxes within [`BEND_BORDER_PX`] of
-    /// its edge do not count in a track's bend ([`TrackLine::bend_t`]).
+    /// The picture's size `[width, height]`, where known: boxes cut by its edge
+    /// ([`crate::vehicle_scale::BORDER_PX`]) do not count in a track's bend
+    /// ([`TrackLine::bend_t`]).
     #[serde(default)]
     pub frame: Option<[f64; 2]>,
 }
-
-/// A box closer than this to the picture's edge (pixels) is cut by it: its centre is not the
-/// vehicle's, and it does not count in the track's bend. A car leaving the frame at the bottom
-/// corner moves its box's centre sideways by half its hidden width; on the M6 motorway clip such
-/// boxes made straight tracks bend by several degrees.
-pub const BEND_BORDER_PX: f64 = 2.0;
 
 /// Only a track's boxes at least this share of its tallest box's height count in its bend.
 /// Far away a box is a few pixels tall, and there the detector's box drifts with the traffic
@@ -254,7 +250,7 @@ pub fn fit_line(boxes: &[(f64, BoxPx)], track: &[usize], opts: &TrackOptions) ->
 }
 
 /// [`bend`] over the track's boxes that are neither cut by the picture's edge
-/// ([`BEND_BORDER_PX`]) nor far smaller than its tallest box ([`BEND_MIN_HEIGHT_SHARE`]),
+/// ([`BORDER_PX`]) nor far smaller than its tallest box ([`BEND_MIN_HEIGHT_SHARE`]),
 /// about their own line, signed as seen along `dir`.
 fn bend_of_clear_boxes(
     boxes: &[(f64, BoxPx)],
@@ -266,12 +262,12 @@ fn bend_of_clear_boxes(
         .iter()
         .map(|&i| boxes[i].1.height())
         .fold(0.0f64, f64::max);
+    // A cut box's centre moves across the track as the car leaves the frame. In a prototype
+    // of these rules (Python, on the recorded 300 frames), the straight M6 motorway's
+    // tracks bent alike on 10 of 16 with cut boxes counted, and on 2 of 18 without them.
     let inside = |b: &BoxPx| {
         frame.is_none_or(|[w, h]| {
-            b.x0 > BEND_BORDER_PX
-                && b.y0 > BEND_BORDER_PX
-                && b.x1 < w - BEND_BORDER_PX
-                && b.y1 < h - BEND_BORDER_PX
+            b.x0 > BORDER_PX && b.y0 > BORDER_PX && b.x1 < w - BORDER_PX && b.y1 < h - BORDER_PX
         })
     };
     let centres: Vec<Point2> = track
