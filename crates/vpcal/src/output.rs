@@ -94,7 +94,20 @@ pub fn calibration_file(
 ) -> CalibrationFile {
     let mut file = aggregated_file(input_summary(out), cal, agg);
     file.settings = settings(out, config);
+    keep_input_warnings(&mut file, out);
     file
+}
+
+/// The run's warnings about its input (a truncated or damaged file: which frames were used)
+/// go into the file first, so that the file says what it was made from.
+fn keep_input_warnings(file: &mut CalibrationFile, out: &PipelineOutput) {
+    let mut warnings = out.warnings.clone();
+    warnings.extend(
+        std::mem::take(&mut file.warnings)
+            .into_iter()
+            .filter(|w| !out.warnings.contains(w)),
+    );
+    file.warnings = warnings;
 }
 
 /// The calibration file of camera `cal` aggregated as `agg` from what `input` describes
@@ -390,6 +403,7 @@ pub fn failure_file(
 ) -> CalibrationFile {
     let mut file = CalibrationFile::not_calibrated(input_summary(out), reason);
     file.settings = settings(out, config);
+    keep_input_warnings(&mut file, out);
     file
 }
 

@@ -646,8 +646,17 @@ fn table(rows: &[(&str, String)]) -> String {
 }
 
 /// The warnings section: every warning in plain words with what to do about it.
+/// The file's warnings, then the run's that it does not hold (a calibrate run's warnings
+/// about its input are in its file too): each once.
+fn all_warnings<'a>(file: &'a CalibrationFile, run_warnings: &'a [String]) -> Vec<&'a String> {
+    file.warnings
+        .iter()
+        .chain(run_warnings.iter().filter(|w| !file.warnings.contains(w)))
+        .collect()
+}
+
 fn warnings_section(file: &CalibrationFile, run_warnings: &[String]) -> String {
-    let all: Vec<&String> = file.warnings.iter().chain(run_warnings).collect();
+    let all = all_warnings(file, run_warnings);
     if all.is_empty() {
         return "<section id=\"warnings\"><h2>Warnings</h2><p>None: the calibration carries no \
                 warning.</p></section>"
@@ -1383,8 +1392,8 @@ pub fn render_with(file: &CalibrationFile, input: &ReportInput<'_>) -> String {
                 ),
                 (None, _) => ", no metric scale".to_string(),
             },
-            file.warnings.len() + input.run_warnings.len(),
-            if file.warnings.len() + input.run_warnings.len() == 1 {
+            all_warnings(file, input.run_warnings).len(),
+            if all_warnings(file, input.run_warnings).len() == 1 {
                 ""
             } else {
                 "s"

@@ -645,3 +645,35 @@ fn calibrate_checks_the_report_path_first_and_reports_a_failed_run() {
     assert_eq!(images.len(), 1);
     assert_eq!((images[0].width(), images[0].height()), (160, 120));
 }
+
+/// A run that stopped early on a damaged input says so in its calibration file (calibrated or
+/// not), and its report shows the warning once, not once from the file and once from the run.
+#[test]
+fn the_input_warnings_of_a_run_are_in_its_file_and_once_in_its_report() {
+    let warning = "clip.mp4: stopped reading after 10 frames: damaged data; the frames before \
+                   it are used"
+        .to_string();
+    let mut out = run_output(vec![record(3, BoxPx::new(100.0, 100.0, 160.0, 150.0))], 10);
+    out.warnings = vec![warning.clone()];
+    let config = vpcal::pipeline::PipelineConfig::default();
+    let cal = camera();
+    let agg = aggregated(&cal, FocalSource::Edgelets, evidence());
+    let calibrated = vpcal::output::calibration_file(&out, &config, &cal, &agg);
+    let failed = vpcal::output::failure_file(&out, &config, "not enough evidence".into());
+    for file in [&calibrated, &failed] {
+        assert_eq!(file.warnings.first(), Some(&warning), "{:?}", file.warnings);
+        assert_eq!(file.warnings.iter().filter(|w| **w == warning).count(), 1);
+        let html = report::render_with(
+            file,
+            &ReportInput {
+                overlay_png: None,
+                tracks: None,
+                tracks_note: None,
+                run_warnings: &out.warnings,
+            },
+        );
+        assert_eq!(html.matches("stopped reading after 10 frames").count(), 1);
+    }
+    // The other warnings stay, after it.
+    assert_eq!(calibrated.warnings[1..], agg.warnings()[..]);
+}

@@ -554,7 +554,8 @@ pub fn run(args: Args) -> Result<Exit> {
             // The warnings the summary has not printed yet (the scale's, the plausibility
             // checks').
             let printed = agg.warnings();
-            for w in doc.warnings.iter().filter(|w| !printed.contains(w)) {
+            let printed = |w: &&String| printed.contains(w) || out.warnings.contains(w);
+            for w in doc.warnings.iter().filter(|w| !printed(w)) {
                 eprintln!("warning: {w}");
             }
             if doc.status != vpcal_formats::calib::Status::Calibrated {
