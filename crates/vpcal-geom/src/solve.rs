@@ -101,6 +101,30 @@ impl SplitMix {
     }
 }
 
+/// `f` of each item, in the items' order, the items split into one contiguous run per core.
+///
+/// The result is the same as `items.iter().map(f)` whatever the number of cores, so a
+/// caller stays deterministic as long as `f` is (draw the random numbers before, in order).
+pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = cores.min(items.len());
+    if threads <= 1 {
+        return items.iter().map(f).collect();
+    }
+    let chunk = items.len().div_ceil(threads);
+    let f = &f;
+    std::thread::scope(|s| {
+        let handles: Vec<_> = items
+            .chunks(chunk)
+            .map(|run| s.spawn(move || run.iter().map(f).collect::<Vec<R>>()))
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    })
+}
+
 /// The result of [`nelder_mead`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Minimum {
@@ -196,6 +220,16 @@ pub fn nelder_mead(f: impl Fn(&[f64]) -> f64, x0: &[f64], step: &[f64], iters: u
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn par_map_keeps_the_order_of_the_items() {
+        let items: Vec<u64> = (0..1001).collect();
+        let got = par_map(&items, |&x| x * x + 1);
+        let want: Vec<u64> = items.iter().map(|&x| x * x + 1).collect();
+        assert_eq!(got, want);
+        assert!(par_map(&[] as &[u64], |&x| x).is_empty());
+        assert_eq!(par_map(&[7u64], |&x| x + 1), vec![8]);
+    }
 
     #[test]
     fn nelder_mead_finds_the_minimum_of_the_rosenbrock_valley() {

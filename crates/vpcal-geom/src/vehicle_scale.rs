@@ -228,16 +228,20 @@ pub fn scale_from_vehicles(
     let mut rejected_misfit = 0;
     // (group, ln metres-per-unit, rms)
     let mut fits: Vec<(Option<u64>, f64, f64)> = Vec::new();
-    for b in boxes {
-        let bb = b.bbox;
-        if !bb.is_valid() {
-            continue;
-        }
-        if !bb.clear_of_edges(width, height, BORDER_PX) {
+    let mut clear: Vec<&SizedBox> = Vec::new();
+    for b in boxes.iter().filter(|b| b.bbox.is_valid()) {
+        if b.bbox.clear_of_edges(width, height, BORDER_PX) {
+            clear.push(b);
+        } else {
             rejected_border += 1;
-            continue;
         }
-        let Some(fit) = fit_cuboid(cal, bb, b.heading.unwrap_or(0.0), dims) else {
+    }
+    // One fit per box, independent: spread over the cores.
+    let cuboids = crate::solve::par_map(&clear, |b| {
+        fit_cuboid(cal, b.bbox, b.heading.unwrap_or(0.0), dims)
+    });
+    for (b, fit) in clear.iter().zip(cuboids) {
+        let Some(fit) = fit else {
             continue;
         };
         if fit.rms > MAX_FIT_RMS {

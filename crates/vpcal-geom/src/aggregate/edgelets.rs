@@ -26,7 +26,7 @@
 use super::line_angle_diff;
 use super::tracks::Tangent;
 use crate::point::Point2;
-use crate::solve::{nelder_mead, percentile, sd, SplitMix};
+use crate::solve::{nelder_mead, par_map, percentile, sd, SplitMix};
 
 /// Focal lengths the straight edgelet fit's grid spans, in image widths: 0.25 (a 127° view) to
 /// 20 (a 3° view), beyond the physical range of traffic cameras on both sides, so that the
@@ -367,15 +367,19 @@ pub fn fit(
     let ones = vec![1.0; flat.groups];
     let [lo_w, hi_w] = STRAIGHT_FOCAL_GRID_WIDTHS;
     let (lo, hi) = ((lo_w * width).ln(), (hi_w * width).ln());
+    // The grid's and the bootstrap's fits are independent: they run spread over the cores,
+    // each the same as one after another.
+    let grid: Vec<[f64; 2]> = (0..32)
+        .flat_map(|i| {
+            let ln_f = lo + (hi - lo) * f64::from(i) / 31.0;
+            (-20..=20).map(move |j| [ln_f, roll0 + f64::from(j) * 0.5f64.to_radians()])
+        })
+        .collect();
+    let costs = par_map(&grid, |x| cost(&flat, &ones, vp1, pp, x, s));
     let mut best = (f64::INFINITY, [0.0, 0.0]);
-    for i in 0..32 {
-        let ln_f = lo + (hi - lo) * f64::from(i) / 31.0;
-        for j in -20..=20 {
-            let x = [ln_f, roll0 + f64::from(j) * 0.5f64.to_radians()];
-            let c = cost(&flat, &ones, vp1, pp, &x, s);
-            if c < best.0 {
-                best = (c, x);
-            }
+    for (x, c) in grid.into_iter().zip(costs) {
+        if c < best.0 {
+            best = (c, x);
         }
     }
     let step0 = [0.05, 0.2f64.to_radians()];
@@ -387,34 +391,37 @@ pub fn fit(
     )
     .x;
     let mut rng = SplitMix(seed ^ 0xED6E_1E75);
-    let (mut fs, mut rolls) = (vec![], vec![]);
-    for _ in 0..opts.bootstrap {
-        // One count per vehicle, shared by its boxes.
-        let draws: Vec<f64> = (0..flat.vehicles).map(|_| rng.poisson1()).collect();
-        let w: Vec<f64> = flat.vehicle_of_group.iter().map(|&v| draws[v]).collect();
-        let xb = nelder_mead(
-            |x| cost(&flat, &w, vp1, pp, x, s),
+    let weights: Vec<Vec<f64>> = (0..opts.bootstrap)
+        .map(|_| {
+            // One count per vehicle, shared by its boxes.
+            let draws: Vec<f64> = (0..flat.vehicles).map(|_| rng.poisson1()).collect();
+            flat.vehicle_of_group.iter().map(|&v| draws[v]).collect()
+        })
+        .collect();
+    let refits = par_map(&weights, |w| {
+        nelder_mead(
+            |x| cost(&flat, w, vp1, pp, x, s),
             &x,
             &step0,
             REFIT_ITERATIONS,
         )
-        .x;
-        fs.push(xb[0].exp());
-        rolls.push(line_angle_diff(xb[1] - x[1]).to_degrees());
-    }
-    let turned: Vec<f64> = [EDGE_BIAS_DEG, -EDGE_BIAS_DEG]
+        .x
+    });
+    let fs: Vec<f64> = refits.iter().map(|xb| xb[0].exp()).collect();
+    let rolls: Vec<f64> = refits
         .iter()
-        .map(|t| {
-            let turn = t.to_radians();
-            nelder_mead(
-                |x| cost_turned(&flat, &ones, vp1, pp, x, s, turn),
-                &x,
-                &step0,
-                REFIT_ITERATIONS,
-            )
-            .x[0]
-        })
+        .map(|xb| line_angle_diff(xb[1] - x[1]).to_degrees())
         .collect();
+    let turned: Vec<f64> = par_map(&[EDGE_BIAS_DEG, -EDGE_BIAS_DEG], |t| {
+        let turn = t.to_radians();
+        nelder_mead(
+            |x| cost_turned(&flat, &ones, vp1, pp, x, s, turn),
+            &x,
+            &step0,
+            REFIT_ITERATIONS,
+        )
+        .x[0]
+    });
     let focal_bias_log_spread = 0.5 * (turned[0] - turned[1]).abs();
     let (h, u) = vp2_direction(vp1, pp, x[0], x[1]);
     let vp2 = vp1 + h / u;
@@ -684,19 +691,23 @@ pub fn fit_curved(
     let coarse_weight = weights(&coarse);
     let [lo_w, hi_w] = CURVED_FOCAL_GRID_WIDTHS;
     let (lo, hi) = ((lo_w * width).ln(), (hi_w * width).ln());
+    let grid: Vec<[f64; 3]> = (0..16)
+        .flat_map(|i| {
+            let ln_f = lo + (hi - lo) * f64::from(i) / 15.0;
+            (-6..=6).flat_map(move |j| {
+                let roll = roll0 + f64::from(j).to_radians();
+                (0..40).map(move |k| {
+                    let y0 = pp.y - 3.0 * height * (1.0 - f64::from(k) / 40.0);
+                    [ln_f, roll, y0]
+                })
+            })
+        })
+        .collect();
+    let costs = par_map(&grid, |x| coarse.cost(&coarse_weight, pp, x, s, ex1));
     let mut best = (f64::INFINITY, [0.0; 3]);
-    for i in 0..16 {
-        let ln_f = lo + (hi - lo) * f64::from(i) / 15.0;
-        for j in -6..=6 {
-            let roll = roll0 + f64::from(j).to_radians();
-            for k in 0..40 {
-                let y0 = pp.y - 3.0 * height * (1.0 - f64::from(k) / 40.0);
-                let x = [ln_f, roll, y0];
-                let c = coarse.cost(&coarse_weight, pp, &x, s, ex1);
-                if c < best.0 {
-                    best = (c, x);
-                }
-            }
+    for (x, c) in grid.into_iter().zip(costs) {
+        if c < best.0 {
+            best = (c, x);
         }
     }
     let step0 = [0.05, 0.3f64.to_radians(), 0.01 * height];
@@ -708,7 +719,6 @@ pub fn fit_curved(
     )
     .x;
     let mut rng = SplitMix(seed ^ 0xC0C0_1E75);
-    let (mut fs, mut rolls) = (vec![], vec![]);
     // The resamples refit the coarse cost (2000 edgelets), whose optimum is not the full
     // fit's: they spread around the coarse fit, and are moved onto the full fit by the ratio
     // of the two (otherwise the interval can miss its own estimate).
@@ -720,24 +730,31 @@ pub fn fit_curved(
     )
     .x;
     let shift = (x[0] - centre[0]).exp();
-    for _ in 0..opts.bootstrap.min(10) {
-        // One count per vehicle, shared by its boxes.
-        let draws: Vec<f64> = (0..coarse.vehicles).map(|_| rng.poisson1()).collect();
-        let w: Vec<f64> = coarse_weight
-            .iter()
-            .zip(&coarse.vehicle)
-            .map(|(cw, &v)| cw * draws[v])
-            .collect();
-        let xb = nelder_mead(
-            |x| coarse.cost(&w, pp, x, s, ex1),
+    let resampled: Vec<Vec<f64>> = (0..opts.bootstrap.min(10))
+        .map(|_| {
+            // One count per vehicle, shared by its boxes.
+            let draws: Vec<f64> = (0..coarse.vehicles).map(|_| rng.poisson1()).collect();
+            coarse_weight
+                .iter()
+                .zip(&coarse.vehicle)
+                .map(|(cw, &v)| cw * draws[v])
+                .collect()
+        })
+        .collect();
+    let refits = par_map(&resampled, |w| {
+        nelder_mead(
+            |x| coarse.cost(w, pp, x, s, ex1),
             &centre,
             &step0,
             REFIT_ITERATIONS,
         )
-        .x;
-        fs.push(xb[0].exp() * shift);
-        rolls.push(line_angle_diff(xb[1] - centre[1]).to_degrees());
-    }
+        .x
+    });
+    let fs: Vec<f64> = refits.iter().map(|xb| xb[0].exp() * shift).collect();
+    let rolls: Vec<f64> = refits
+        .iter()
+        .map(|xb| line_angle_diff(xb[1] - centre[1]).to_degrees())
+        .collect();
     // VP1: the median of the vehicles' own VP1s along the horizon.
     let h = Point2::new(x[1].cos(), x[1].sin());
     let n = Point2::new(-h.y, h.x);

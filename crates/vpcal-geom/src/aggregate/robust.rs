@@ -1876,32 +1876,41 @@ fn bootstrap(
     let q1 = from_sphere(p1);
     let scaled =
         |w: &[f64], c: &[f64]| -> Vec<f64> { w.iter().zip(c).map(|(a, c)| a * c).collect() };
-    for _ in 0..resamples {
-        let draws: Vec<f64> = (0..prep.units).map(|_| rng.poisson1()).collect();
-        let counts: Vec<f64> = prep.unit.iter().map(|&u| draws[u]).collect();
-        let w = scaled(&prep.weight, &counts);
-        let wv1 = if vp1_lines.from_tracks {
-            let counts1: Vec<f64> = (0..vp1_lines.weight.len())
-                .map(|_| rng.poisson1())
-                .collect();
-            scaled(&vp1_lines.weight, &counts1)
-        } else {
-            scaled(&vp1_lines.weight, &counts)
-        };
+    // The draws in order, then the refits (independent of each other) over the cores: the
+    // same resamples as drawing and fitting one after another.
+    let draws: Vec<(Vec<f64>, Vec<f64>)> = (0..resamples)
+        .map(|_| {
+            let draws: Vec<f64> = (0..prep.units).map(|_| rng.poisson1()).collect();
+            let counts: Vec<f64> = prep.unit.iter().map(|&u| draws[u]).collect();
+            let w = scaled(&prep.weight, &counts);
+            let wv1 = if vp1_lines.from_tracks {
+                let counts1: Vec<f64> = (0..vp1_lines.weight.len())
+                    .map(|_| rng.poisson1())
+                    .collect();
+                scaled(&vp1_lines.weight, &counts1)
+            } else {
+                scaled(&vp1_lines.weight, &counts)
+            };
+            (w, wv1)
+        })
+        .collect();
+    let refits = crate::solve::par_map(&draws, |(w, wv1)| {
         let threshold = vp1_lines.threshold_deg;
-        let Some(pb) = fit_vp1(vp1_lines.lines(), &wv1, threshold, rng, Some(q1)) else {
-            continue;
-        };
-        let Some(vb) = vp1_of(pb) else { continue };
+        // With a start, the VP1 fit draws no random numbers.
+        let mut unused = SplitMix(0);
+        let pb = fit_vp1(vp1_lines.lines(), wv1, threshold, &mut unused, Some(q1))?;
+        let vb = vp1_of(pb)?;
         let mb = Vp2Model { vp1: vb, ..*model };
-        let (vb, xb, _) = fit_camera(&mb, vp1_lines, &wv1, &w, Some(x));
+        let (vb, xb, _) = fit_camera(&mb, vp1_lines, wv1, w, Some(x));
         let vb = scene
             .and_then(|(edgelets, so)| scene_lines::refine_vp1(vb, edgelets, so))
             .map_or(vb, |f| f.vp1);
         let mb = Vp2Model { vp1: vb, ..*model };
         let (hb, ub) = mb.vp2(xb[0], xb[1]);
-        out.focal_px.push(xb[0].exp());
-        let vp2b = vb + hb / ub;
+        Some((vb, vb + hb / ub, xb[0].exp()))
+    });
+    for (vb, vp2b, focal) in refits.into_iter().flatten() {
+        out.focal_px.push(focal);
         out.horizon_deg
             .push((vp2b.y - vb.y).atan2(vp2b.x - vb.x).to_degrees());
         out.vp1_x.push(vb.x);

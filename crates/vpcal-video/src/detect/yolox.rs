@@ -249,33 +249,31 @@ pub fn letterbox_input(image: &RgbImage, lb: &Letterbox, out: &mut Vec<f32>) {
     let wy = area_weights(r.y0, r.height, lb.resized.1);
     let (iw, ih) = (image.width() as usize, image.height() as usize);
     let raw = image.as_raw();
-    // Horizontal pass over the rows the region covers: rows × ow × 3.
-    let rows = r.y0 as usize..(r.y0 + r.height).min(ih as u32) as usize;
-    let mut horiz = vec![0f32; rows.len() * ow * 3];
-    for (ri, y) in rows.clone().enumerate() {
-        let line = &raw[y * iw * 3..(y + 1) * iw * 3];
-        for (xo, (j0, w)) in wx.iter().enumerate() {
-            let mut acc = [0f32; 3];
-            for (k, &wk) in w.iter().enumerate() {
-                let j = j0 + k;
-                if j < iw {
-                    let p = &line[j * 3..j * 3 + 3];
-                    acc[0] += wk * f32::from(p[0]);
-                    acc[1] += wk * f32::from(p[1]);
-                    acc[2] += wk * f32::from(p[2]);
-                }
-            }
-            horiz[(ri * ow + xo) * 3..(ri * ow + xo) * 3 + 3].copy_from_slice(&acc);
-        }
-    }
+    // Vertical pass first, one output row at a time: each tap adds a whole contiguous row
+    // span of the region (`width × 3` bytes), a loop the compiler vectorises; then the
+    // horizontal pass reads only that one averaged row. (Horizontal first, over every row of
+    // the region, took about a fifth of the detector's time at 1080p.)
+    let x_lo = (r.x0 as usize).min(iw);
+    let x_hi = ((r.x0 + r.width) as usize).min(iw);
+    let mut row = vec![0f32; (x_hi - x_lo) * 3];
     let plane = n * n;
     for (yo, (j0, w)) in wy.iter().enumerate().take(oh) {
-        for xo in 0..ow {
+        row.fill(0.0);
+        for (k, &wk) in w.iter().enumerate() {
+            let y = j0 + k;
+            if y >= ih {
+                break;
+            }
+            let line = &raw[(y * iw + x_lo) * 3..(y * iw + x_hi) * 3];
+            for (acc, &p) in row.iter_mut().zip(line) {
+                *acc += wk * f32::from(p);
+            }
+        }
+        for (xo, (j0, w)) in wx.iter().enumerate().take(ow) {
             let mut acc = [0f32; 3];
             for (k, &wk) in w.iter().enumerate() {
-                let ri = (j0 + k).wrapping_sub(rows.start);
-                if ri < rows.len() {
-                    let p = &horiz[(ri * ow + xo) * 3..(ri * ow + xo) * 3 + 3];
+                let j = (j0 + k).wrapping_sub(x_lo);
+                if let Some(p) = row.get(j * 3..j * 3 + 3) {
                     acc[0] += wk * p[0];
                     acc[1] += wk * p[1];
                     acc[2] += wk * p[2];
@@ -779,6 +777,61 @@ mod tests {
             }
             let (j0, ws) = w.last().map(|(a, b)| (*a, b.len())).unwrap_or((0, 0));
             assert!(j0 + ws <= (off + len) as usize);
+        }
+    }
+
+    /// The input pixel is the area average of the region's pixels it covers: checked against
+    /// the average computed directly, pixel by pixel in f64, on a textured frame and a tile
+    /// that does not start at the frame's corner.
+    #[test]
+    fn letterbox_input_is_the_area_average_of_the_region() {
+        let img = RgbImage::from_fn(301, 173, |x, y| {
+            image::Rgb([
+                ((x * 7 + y * 3) % 256) as u8,
+                ((x * x + 5 * y) % 251) as u8,
+                ((x * y) % 253) as u8,
+            ])
+        });
+        for region in [
+            Region::whole(301, 173),
+            Region {
+                x0: 120,
+                y0: 40,
+                width: 133,
+                height: 133,
+            },
+        ] {
+            let lb = Letterbox::new(region, 64);
+            let mut input = Vec::new();
+            letterbox_input(&img, &lb, &mut input);
+            let (sx, sy) = lb.scale();
+            let n = 64usize;
+            for yo in 0..lb.resized.1 as usize {
+                for xo in 0..lb.resized.0 as usize {
+                    let a = f64::from(region.x0) + xo as f64 * sx;
+                    let c = f64::from(region.y0) + yo as f64 * sy;
+                    let mut want = [0f64; 3];
+                    for y in c.floor() as u32..(c + sy).ceil() as u32 {
+                        let oy = (c + sy).min(f64::from(y) + 1.0) - c.max(f64::from(y));
+                        for x in a.floor() as u32..(a + sx).ceil() as u32 {
+                            let ox = (a + sx).min(f64::from(x) + 1.0) - a.max(f64::from(x));
+                            let p = img.get_pixel(x, y).0;
+                            for ch in 0..3 {
+                                want[ch] += ox.max(0.0) * oy.max(0.0) * f64::from(p[ch]);
+                            }
+                        }
+                    }
+                    for ch in 0..3 {
+                        // Planes are BGR.
+                        let got = f64::from(input[(2 - ch) * n * n + yo * n + xo]);
+                        let want = want[ch] / (sx * sy);
+                        assert!(
+                            (got - want).abs() < 1e-3,
+                            "({xo}, {yo}) ch {ch}: {got} vs {want}"
+                        );
+                    }
+                }
+            }
         }
     }
 
