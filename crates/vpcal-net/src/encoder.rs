@@ -39,6 +39,7 @@ use burn::tensor::ops::{InterpolateMode, InterpolateOptions, MaxPoolOptions};
 use burn::tensor::{Device, Tensor};
 
 use crate::config::ModelConfig;
+use crate::model::apply;
 use crate::store::WeightsFile;
 use crate::NetError;
 
@@ -104,8 +105,8 @@ impl DwConv {
 
     /// `[b, cin, h, w]` -> `[b, cout, h / s, w / s]`
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let x = silu(self.dconv.forward(x)); // [b, cin, h/s, w/s]
-        silu(self.pconv.forward(x)) // [b, cout, h/s, w/s]
+        let x = silu(apply(&self.dconv, x)); // [b, cin, h/s, w/s]
+        silu(apply(&self.pconv, x)) // [b, cout, h/s, w/s]
     }
 }
 
@@ -120,7 +121,7 @@ pub struct Bottleneck {
 impl Bottleneck {
     /// `[b, c, h, w]` -> `[b, c, h, w]`
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = self.conv2.forward(silu(self.conv1.forward(x.clone())));
+        let y = self.conv2.forward(silu(apply(&self.conv1, x.clone())));
         if self.shortcut {
             y + x
         } else {
@@ -157,12 +158,12 @@ impl Csp {
 
     /// `[b, c, h, w]` -> `[b, c, h, w]`
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let mut y1 = silu(self.conv1.forward(x.clone())); // [b, c/2, h, w]
+        let mut y1 = silu(apply(&self.conv1, x.clone())); // [b, c/2, h, w]
         for block in &self.m {
             y1 = block.forward(y1);
         }
-        let y2 = silu(self.conv2.forward(x)); // [b, c/2, h, w]
-        silu(self.conv3.forward(Tensor::cat(vec![y1, y2], 1))) // [b, c, h, w]
+        let y2 = silu(apply(&self.conv2, x)); // [b, c/2, h, w]
+        silu(apply(&self.conv3, Tensor::cat(vec![y1, y2], 1))) // [b, c, h, w]
     }
 }
 
@@ -176,14 +177,14 @@ pub struct Spp {
 impl Spp {
     /// `[b, c, h, w]` -> `[b, c, h, w]`
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let x = silu(self.conv1.forward(x)); // [b, c/2, h, w]
+        let x = silu(apply(&self.conv1, x)); // [b, c/2, h, w]
         let pooled = vec![
             x.clone(),
             pool_same(x.clone(), 5),
             pool_same(x.clone(), 9),
             pool_same(x, 13),
         ];
-        silu(self.conv2.forward(Tensor::cat(pooled, 1))) // [b, c, h, w]
+        silu(apply(&self.conv2, Tensor::cat(pooled, 1))) // [b, c, h, w]
     }
 }
 
@@ -233,7 +234,7 @@ impl Focus {
             .reshape([b, c, h / 2, 2, w / 2, 2]) // [b, c, i, dy, j, dx]
             .permute([0, 5, 3, 1, 2, 4]) // [b, dx, dy, c, i, j]
             .reshape([b, 4 * c, h / 2, w / 2]);
-        silu(self.conv.forward(x))
+        silu(apply(&self.conv, x))
     }
 }
 
@@ -359,7 +360,7 @@ impl ConvBn {
 
     /// `[b, c, h, w]` -> `[b, c, h, w]`
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(self.bn.forward(self.conv.forward(x)))
+        relu(self.bn.forward(apply(&self.conv, x)))
     }
 }
 
@@ -465,7 +466,7 @@ impl EncoderNet {
         }
         let mut p: Option<Tensor<4>> = None;
         for (lateral, f) in self.lateral.iter().zip(features.coarse_to_fine()) {
-            let l = lateral.forward(f); // [b, w, S/s, S/s]
+            let l = apply(lateral, f); // [b, w, S/s, S/s]
             p = Some(match p {
                 Some(p) => upsample2(p) + l,
                 None => l,
@@ -478,7 +479,7 @@ impl EncoderNet {
         for layer in &self.head {
             x = layer.forward(x); // [b, w, hm, hm]
         }
-        self.out.forward(x) // [b, outputs, hm, hm]
+        apply(&self.out, x) // [b, outputs, hm, hm]
     }
 }
 
