@@ -834,11 +834,7 @@ pub fn run_pipeline_on(
                     }
                 }
                 let t = Instant::now();
-                let results = if frames.len() == 1 {
-                    vec![detector.detect(&frames[0])]
-                } else {
-                    detector.detect_batch(&frames)
-                };
+                let results = detector.detect_batch(&frames);
                 let seconds = t.elapsed().as_secs_f64() / frames.len() as f64;
                 let learned_until = detector.learned_until();
                 for (frame, dets) in frames.into_iter().zip(results) {

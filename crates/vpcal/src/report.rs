@@ -645,7 +645,6 @@ fn table(rows: &[(&str, String)]) -> String {
     s
 }
 
-/// The warnings section: every warning in plain words with what to do about it.
 /// The file's warnings, then the run's that it does not hold (a calibrate run's warnings
 /// about its input are in its file too): each once.
 fn all_warnings<'a>(file: &'a CalibrationFile, run_warnings: &'a [String]) -> Vec<&'a String> {
@@ -655,6 +654,7 @@ fn all_warnings<'a>(file: &'a CalibrationFile, run_warnings: &'a [String]) -> Ve
         .collect()
 }
 
+/// The warnings section: every warning in plain words with what to do about it.
 fn warnings_section(file: &CalibrationFile, run_warnings: &[String]) -> String {
     let all = all_warnings(file, run_warnings);
     if all.is_empty() {
@@ -1363,6 +1363,7 @@ pub fn render_with(file: &CalibrationFile, input: &ReportInput<'_>) -> String {
     );
     if calibrated {
         let assumed = file.focal_source.as_deref() == Some("prior");
+        let warnings = all_warnings(file, input.run_warnings).len();
         let (class, status) = match file.status {
             Status::Calibrated if assumed => ("assumed", "Calibrated"),
             Status::Calibrated => ("ok", "Calibrated"),
@@ -1392,12 +1393,8 @@ pub fn render_with(file: &CalibrationFile, input: &ReportInput<'_>) -> String {
                 ),
                 (None, _) => ", no metric scale".to_string(),
             },
-            all_warnings(file, input.run_warnings).len(),
-            if all_warnings(file, input.run_warnings).len() == 1 {
-                ""
-            } else {
-                "s"
-            }
+            warnings,
+            if warnings == 1 { "" } else { "s" }
         );
     } else {
         let _ = write!(

@@ -1878,7 +1878,7 @@ fn bootstrap(
         |w: &[f64], c: &[f64]| -> Vec<f64> { w.iter().zip(c).map(|(a, c)| a * c).collect() };
     // The draws in order, then the refits (independent of each other) over the cores: the
     // same resamples as drawing and fitting one after another.
-    let draws: Vec<(Vec<f64>, Vec<f64>)> = (0..resamples)
+    let weights: Vec<(Vec<f64>, Vec<f64>)> = (0..resamples)
         .map(|_| {
             let draws: Vec<f64> = (0..prep.units).map(|_| rng.poisson1()).collect();
             let counts: Vec<f64> = prep.unit.iter().map(|&u| draws[u]).collect();
@@ -1894,7 +1894,7 @@ fn bootstrap(
             (w, wv1)
         })
         .collect();
-    let refits = crate::solve::par_map(&draws, |(w, wv1)| {
+    let refits = crate::solve::par_map(&weights, |(w, wv1)| {
         let threshold = vp1_lines.threshold_deg;
         // With a start, the VP1 fit draws no random numbers.
         let mut unused = SplitMix(0);

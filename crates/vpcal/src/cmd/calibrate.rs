@@ -553,8 +553,8 @@ pub fn run(args: Args) -> Result<Exit> {
             }
             // The warnings the summary has not printed yet (the scale's, the plausibility
             // checks').
-            let printed = agg.warnings();
-            let printed = |w: &&String| printed.contains(w) || out.warnings.contains(w);
+            let shown = agg.warnings();
+            let printed = |w: &&String| shown.contains(w) || out.warnings.contains(w);
             for w in doc.warnings.iter().filter(|w| !printed(w)) {
                 eprintln!("warning: {w}");
             }

@@ -77,11 +77,7 @@ pub fn run(a: Args) -> Result<()> {
             break;
         }
         let t = Instant::now();
-        let results = if pending.len() == 1 {
-            vec![detector.detect(&pending[0])]
-        } else {
-            detector.detect_batch(&pending)
-        };
+        let results = detector.detect_batch(&pending);
         detect_s += t.elapsed().as_secs_f64();
         for (frame, dets) in pending.drain(..).zip(results) {
             let dets =
