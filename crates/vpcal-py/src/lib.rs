@@ -127,6 +127,9 @@ fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
     if let Some(v) = opt(d, "max_per_frame", "an int")? {
         c.max_per_frame = v;
     }
+    if let Some(v) = opt(d, "max_records", "an int")? {
+        c.max_records = v;
+    }
     if let Some(v) = parsed(d, "crops")? {
         c.crops = v;
     }

@@ -78,6 +78,7 @@ pub fn settings(out: &PipelineOutput, c: &PipelineConfig) -> Map<String, Value> 
         "pp": c.pp.to_json(),
         "focal": c.focal_px,
         "focal_range": c.focal_range_px,
+        "max_records": c.max_records,
     });
     match v {
         Value::Object(m) => m,

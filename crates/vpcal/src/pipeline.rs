@@ -48,6 +48,16 @@ const BACKGROUND_FRAMES: usize = 32;
 /// fits at most 20,000 edgelets, which 4096 vehicles' near-ray edgelets cover many times.
 pub const EDGELET_RECORDS: usize = 4096;
 
+/// At most this many vehicle records are kept by default (`--max-records`; see
+/// [`RecordBudget`]): about 50 MB with their boxes. A dense 1080p motorway gives about ten
+/// records a frame, so this is some 10,000 frames of it (several hundred vehicles, far more
+/// than the aggregation needs) and about an hour of light traffic.
+pub const MAX_RECORDS: usize = 100_000;
+
+/// The blocks of consecutive frames [`RecordBudget`] keeps or drops whole (20 s at 25
+/// frames/s: a vehicle's track is cut only at a block's ends).
+pub const RECORD_BLOCK_FRAMES: u64 = 500;
+
 /// The principal point when none is given.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PrincipalPoint {
@@ -187,6 +197,8 @@ pub struct PipelineConfig {
     /// The focal lengths the camera can have, `[short, long]` pixels (e.g. a zoom lens's
     /// range): the prior the evidence is weighed against, instead of 15-90° views.
     pub focal_range_px: Option<[f64; 2]>,
+    /// At most this many vehicle records are kept ([`RecordBudget`]).
+    pub max_records: usize,
 }
 
 impl Default for PipelineConfig {
@@ -209,6 +221,7 @@ impl Default for PipelineConfig {
             pp: PrincipalPoint::Centre,
             focal_px: None,
             focal_range_px: None,
+            max_records: MAX_RECORDS,
         }
     }
 }
@@ -221,6 +234,9 @@ impl PipelineConfig {
     pub fn validate(&self) -> Result<()> {
         if self.batch == 0 {
             bail!("--batch must be at least 1");
+        }
+        if self.max_records == 0 {
+            bail!("--max-records must be at least 1");
         }
         if !self.min_score.is_finite() {
             bail!("--min-score must be a number");
@@ -353,6 +369,8 @@ pub struct PipelineStats {
     pub crops: u64,
     /// Boxes of followed vehicles the network did not see again (records without VPs).
     pub crops_skipped: u64,
+    /// Every how many blocks of [`RECORD_BLOCK_FRAMES`] frames one kept its records (1: all).
+    pub record_block_stride: u64,
     pub seconds: f64,
     /// Where the time went, per stage.
     pub stages: StageSeconds,
@@ -451,18 +469,95 @@ impl EdgeletBudget {
         if !edgelets(&mut records[i]).is_empty() {
             self.holding += 1;
         }
+        self.within_cap(records, &edgelets);
+    }
+
+    /// After records were removed (by [`RecordBudget`]): only every stride-th of those left
+    /// keeps its edgelets, within the cap.
+    pub fn reindexed<T>(
+        &mut self,
+        records: &mut [T],
+        edgelets: impl Fn(&mut T) -> &mut Vec<Edgelet>,
+    ) {
+        self.restride(records, &edgelets);
+        self.within_cap(records, &edgelets);
+    }
+
+    fn within_cap<T>(
+        &mut self,
+        records: &mut [T],
+        edgelets: &impl Fn(&mut T) -> &mut Vec<Edgelet>,
+    ) {
         while self.holding > self.cap {
             self.stride *= 2;
-            self.holding = 0;
-            for (j, r) in records.iter_mut().enumerate() {
-                let list = edgelets(r);
-                if j % self.stride != 0 {
-                    *list = Vec::new();
-                } else if !list.is_empty() {
-                    self.holding += 1;
-                }
+            self.restride(records, edgelets);
+        }
+    }
+
+    /// Drop the edgelets of records off the stride and count those holding some.
+    fn restride<T>(&mut self, records: &mut [T], edgelets: &impl Fn(&mut T) -> &mut Vec<Edgelet>) {
+        self.holding = 0;
+        for (j, r) in records.iter_mut().enumerate() {
+            let list = edgelets(r);
+            if j % self.stride != 0 {
+                *list = Vec::new();
+            } else if !list.is_empty() {
+                self.holding += 1;
             }
         }
+    }
+}
+
+/// Bounds the vehicle records and track boxes a long input leaves in memory: every frame's at
+/// first; whenever more than `cap` records are kept, only every second block of
+/// [`RECORD_BLOCK_FRAMES`] frames of those kept keeps its records and boxes, and so on. What
+/// is kept is then blocks of whole tracks spread evenly over the input (like processing one
+/// stretch of footage out of every 2, 4, ...), so memory stays flat however long the input,
+/// and nothing changes on inputs that stay under the cap.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RecordBudget {
+    cap: usize,
+    /// Every `stride`-th block is kept.
+    stride: u64,
+}
+
+impl RecordBudget {
+    pub fn new(cap: usize) -> RecordBudget {
+        RecordBudget {
+            cap: cap.max(1),
+            stride: 1,
+        }
+    }
+
+    /// Whether the records and boxes of source frame `frame` are kept.
+    pub fn keeps(&self, frame: u64) -> bool {
+        (frame / RECORD_BLOCK_FRAMES) % self.stride == 0
+    }
+
+    /// Every how many blocks one is kept (1: all).
+    pub fn stride(&self) -> u64 {
+        self.stride
+    }
+
+    /// Thin `records` and `boxes` (blocks at a doubled stride) while more than the cap of
+    /// records are kept and they span more than the first block (which is always kept: a cap
+    /// below one block's records keeps that block); `frame_of` gives a record's frame.
+    /// Returns whether anything went.
+    pub fn thin<R>(
+        &mut self,
+        records: &mut Vec<R>,
+        boxes: &mut Vec<TrackBox>,
+        frame_of: impl Fn(&R) -> u64,
+    ) -> bool {
+        let mut thinned = false;
+        while records.len() > self.cap && records.iter().any(|r| frame_of(r) >= RECORD_BLOCK_FRAMES)
+        {
+            self.stride *= 2;
+            records.retain(|r| self.keeps(frame_of(r)));
+            boxes.retain(|b| self.keeps(b.frame));
+            thinned = true;
+        }
+        thinned
     }
 }
 
@@ -517,6 +612,7 @@ struct Stages<'a> {
     /// The latest network VPs of each followed vehicle.
     vehicle_vps: std::collections::HashMap<u64, (Point2, Point2)>,
     budget: EdgeletBudget,
+    records_budget: RecordBudget,
     edgelet_options: EdgeletOptions,
     gate: EdgeletFitOptions,
     stats: PipelineStats,
@@ -538,6 +634,7 @@ impl<'a> Stages<'a> {
             waiting: Vec::new(),
             vehicle_vps: std::collections::HashMap::new(),
             budget: EdgeletBudget::new(EDGELET_RECORDS),
+            records_budget: RecordBudget::new(config.max_records),
             edgelet_options: EdgeletOptions::default(),
             gate: EdgeletFitOptions::default(),
             stats: PipelineStats::default(),
@@ -594,6 +691,20 @@ impl<'a> Stages<'a> {
         let t = Instant::now();
         let filtered = filter.apply(frame, dets);
         self.stats.stages.filter += t.elapsed().as_secs_f64();
+        for (_, why) in &filtered.dropped {
+            match why {
+                DropReason::LowScore => self.stats.dropped_low_score += 1,
+                DropReason::Static => self.stats.dropped_static += 1,
+                DropReason::OverLimit => self.stats.dropped_over_limit += 1,
+                DropReason::OutsideFrame => self.stats.dropped_outside += 1,
+                DropReason::SeenBefore => self.stats.dropped_seen += 1,
+            }
+        }
+        // A frame of a block the record budget has dropped keeps nothing: it only moves the
+        // filter on (and a followed vehicle's gap ends it in the crop planner).
+        if !self.records_budget.keeps(frame.index) {
+            return Ok(());
+        }
         let over_limit = filtered
             .dropped
             .iter()
@@ -605,15 +716,6 @@ impl<'a> Stages<'a> {
                 bbox: d.bbox,
                 score: d.score,
             }));
-        for (_, why) in &filtered.dropped {
-            match why {
-                DropReason::LowScore => self.stats.dropped_low_score += 1,
-                DropReason::Static => self.stats.dropped_static += 1,
-                DropReason::OverLimit => self.stats.dropped_over_limit += 1,
-                DropReason::OutsideFrame => self.stats.dropped_outside += 1,
-                DropReason::SeenBefore => self.stats.dropped_seen += 1,
-            }
-        }
         if filtered.kept.is_empty() {
             return Ok(());
         }
@@ -685,14 +787,16 @@ impl<'a> Stages<'a> {
         }
         let t = Instant::now();
         let preds = self.net.predict_prepared(&self.pending)?;
-        for ((frame, score, crop_box, det_box, edgelets, vehicle), p) in
-            self.pending_meta.drain(..).zip(preds)
-        {
+        let mut meta = std::mem::take(&mut self.pending_meta);
+        for ((frame, score, crop_box, det_box, edgelets, vehicle), p) in meta.drain(..).zip(preds) {
             let prediction = p.vp;
             let vp1 = crop_box.frame_from_box(prediction.vp1);
             let vp2 = crop_box.frame_from_box(prediction.vp2);
+            if let Some(id) = vehicle {
+                self.vehicle_vps.insert(id, (vp1, vp2));
+            }
             let edgelets = near_vps(&self.gate, &crop_box, vp1, vp2, &edgelets);
-            self.records.push(VehicleRecord {
+            self.keep(VehicleRecord {
                 frame,
                 score,
                 crop_box,
@@ -702,11 +806,8 @@ impl<'a> Stages<'a> {
                 prediction: Some(prediction),
                 edgelets,
             });
-            self.budget.pushed(&mut self.records, |r| &mut r.edgelets);
-            if let Some(id) = vehicle {
-                self.vehicle_vps.insert(id, (vp1, vp2));
-            }
         }
+        self.pending_meta = meta;
         self.pending.clear();
         self.stats.stages.network += t.elapsed().as_secs_f64();
         self.resolve_waiting(false);
@@ -744,7 +845,7 @@ impl<'a> Stages<'a> {
                 None => Vec::new(),
             };
             self.stats.stages.edgelets += t.elapsed().as_secs_f64();
-            self.records.push(VehicleRecord {
+            self.keep(VehicleRecord {
                 frame: w.frame,
                 score: w.score,
                 crop_box: w.crop_box,
@@ -754,7 +855,24 @@ impl<'a> Stages<'a> {
                 vp2,
                 edgelets,
             });
-            self.budget.pushed(&mut self.records, |r| &mut r.edgelets);
+        }
+    }
+
+    /// Keep a record, within the edgelet and record budgets (a record of a frame whose block
+    /// was dropped while it waited for its batch or its vehicle's VPs goes).
+    fn keep(&mut self, record: VehicleRecord) {
+        if !self.records_budget.keeps(record.frame) {
+            return;
+        }
+        self.records.push(record);
+        self.budget.pushed(&mut self.records, |r| &mut r.edgelets);
+        if self
+            .records_budget
+            .thin(&mut self.records, &mut self.boxes, |r| r.frame)
+        {
+            self.waiting.retain(|w| self.records_budget.keeps(w.frame));
+            self.budget
+                .reindexed(&mut self.records, |r| &mut r.edgelets);
         }
     }
 }
@@ -955,12 +1073,23 @@ pub fn run_pipeline_on(
     stages.flush()?;
     stages.resolve_waiting(true);
     progress.finish();
+    stages.stats.record_block_stride = stages.records_budget.stride();
     let Stages {
         mut records,
         mut boxes,
         mut stats,
         ..
     } = stages;
+    if stats.record_block_stride > 1 {
+        warnings.push(format!(
+            "{}: more than {} vehicle records (--max-records): to keep memory flat, the \
+             records, tracks and speeds are those of one block of {RECORD_BLOCK_FRAMES} frames \
+             in every {}, spread evenly over the input",
+            input.display(),
+            config.max_records,
+            stats.record_block_stride,
+        ));
+    }
     if stats.frames == 0 {
         bail!(
             "{}: no frames to process (empty input, or --start/--max-frames select none)",
@@ -1096,5 +1225,92 @@ mod tests {
             assert!(holding.len() > 5 || n <= 10, "{n}: only {}", holding.len());
         }
         assert_eq!(budget.stride, 128);
+    }
+
+    #[test]
+    fn the_record_budget_keeps_whole_blocks_spread_over_the_input_within_its_cap() {
+        let cap = 3_000;
+        let mut budget = RecordBudget::new(cap);
+        let mut records: Vec<u64> = Vec::new();
+        let mut boxes: Vec<TrackBox> = Vec::new();
+        let mut edgelets = EdgeletBudget::new(100);
+        let mut lists: Vec<Vec<Edgelet>> = Vec::new();
+        // Two boxes a frame for 20 blocks: 20,000 records offered.
+        let frames = 20 * RECORD_BLOCK_FRAMES;
+        for frame in 0..frames {
+            for _ in 0..2 {
+                // As `Stages::keep`: a block may be dropped between two boxes of a frame.
+                if !budget.keeps(frame) {
+                    continue;
+                }
+                records.push(frame);
+                boxes.push(TrackBox {
+                    frame,
+                    bbox: BoxPx::new(0.0, 0.0, 10.0, 10.0),
+                    score: 0.5,
+                });
+                lists.push(vec![Edgelet {
+                    x: 0.0,
+                    y: 0.0,
+                    angle: 0.0,
+                    strength: 1.0,
+                }]);
+                edgelets.pushed(&mut lists, |l| l);
+                let mut paired: Vec<(u64, Vec<Edgelet>)> =
+                    records.iter().copied().zip(lists.drain(..)).collect();
+                if budget.thin(&mut paired, &mut boxes, |r| r.0) {
+                    edgelets.reindexed(&mut paired, |r| &mut r.1);
+                }
+                records = paired.iter().map(|r| r.0).collect();
+                lists = paired.into_iter().map(|r| r.1).collect();
+                assert!(records.len() <= cap);
+                assert!(lists.iter().filter(|l| !l.is_empty()).count() <= 100);
+            }
+        }
+        // 20,000 offered against a cap of 3,000 (1,000 a block): one block in 8 kept.
+        assert_eq!(budget.stride(), 8);
+        assert_eq!(records.len(), 3_000);
+        assert_eq!(boxes.len(), records.len());
+        // Whole blocks, every 8th from the first, and nothing of the others.
+        let blocks: std::collections::BTreeSet<u64> =
+            records.iter().map(|f| f / RECORD_BLOCK_FRAMES).collect();
+        assert_eq!(blocks.into_iter().collect::<Vec<_>>(), vec![0, 8, 16]);
+        assert!(records.iter().all(|&f| budget.keeps(f)));
+        for b in [0, 8, 16] {
+            let n = records
+                .iter()
+                .filter(|&&f| f / RECORD_BLOCK_FRAMES == b)
+                .count();
+            assert_eq!(n as u64, 2 * RECORD_BLOCK_FRAMES);
+        }
+        // The edgelets stay on the stride over the records that are left, within their cap.
+        let holding: Vec<usize> = (0..lists.len()).filter(|&i| !lists[i].is_empty()).collect();
+        assert!((30..=100).contains(&holding.len()), "{}", holding.len());
+        assert!(holding.iter().all(|i| i % edgelets.stride == 0));
+    }
+
+    #[test]
+    fn under_its_cap_the_record_budget_keeps_everything() {
+        let mut budget = RecordBudget::new(10_000);
+        let mut records: Vec<u64> = (0..10_000).collect();
+        let mut boxes = Vec::new();
+        assert!(!budget.thin(&mut records, &mut boxes, |&f| f));
+        assert_eq!(records.len(), 10_000);
+        assert!((0..100_000).all(|f| budget.keeps(f)));
+    }
+
+    #[test]
+    fn a_cap_below_one_block_keeps_the_first_block() {
+        let mut budget = RecordBudget::new(10);
+        let mut records: Vec<u64> = Vec::new();
+        let mut boxes = Vec::new();
+        for frame in 0..10 * RECORD_BLOCK_FRAMES {
+            if budget.keeps(frame) {
+                records.push(frame);
+                budget.thin(&mut records, &mut boxes, |&f| f);
+            }
+        }
+        assert_eq!(records, (0..RECORD_BLOCK_FRAMES).collect::<Vec<_>>());
+        assert_eq!(budget.stride(), 16);
     }
 }

@@ -110,6 +110,7 @@ class Options:
     pp: Optional[Union[str, Tuple[float, float]]] = None
     focal: Optional[float] = None
     focal_range: Optional[Tuple[float, float]] = None
+    max_records: Optional[int] = None
     scale_points: Optional[Tuple[float, float, float, float]] = None
     scale_distance: Optional[float] = None
     tracks: Optional[bool] = None

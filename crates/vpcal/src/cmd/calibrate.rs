@@ -173,6 +173,11 @@ pub struct PipelineArgs {
     /// Bootstrap resamples for the confidence of the robust method (0 to skip).
     #[arg(long, default_value_t = 30)]
     pub bootstrap: usize,
+    /// At most this many vehicle records in memory. Past it, the records, tracks and speeds
+    /// keep one block of 500 frames in every 2 (then 4, 8, ...), spread evenly over the
+    /// input, and a warning says so: memory stays flat on inputs of any length.
+    #[arg(long, value_name = "N", default_value_t = vpcal::pipeline::MAX_RECORDS)]
+    pub max_records: usize,
     /// Principal point: `centre` (the image centre W/2, H/2, in the coordinates where pixel
     /// (i, j) covers [i, i+1) x [j, j+1)), `bcs` (BrnoCompSpeed's W/2 + 0.5, H/2 + 0.5) or
     /// x,y in pixels.
@@ -323,6 +328,7 @@ impl PipelineArgs {
             pp: self.pp,
             focal_px: self.focal,
             focal_range_px: self.focal_range,
+            max_records: self.max_records,
         };
         config.validate()?;
         Ok(config)
