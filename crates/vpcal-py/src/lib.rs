@@ -144,6 +144,14 @@ fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
     }
     c.focal_px = opt(d, "focal", "a number of pixels")?;
     c.focal_range_px = opt(d, "focal_range", "(short, long) focal lengths in pixels")?;
+    if let Some([period, lane]) = opt::<[f64; 2]>(d, "markings", "(period, lane width) in metres")?
+    {
+        c.markings = Some(
+            format!("{period},{lane}")
+                .parse()
+                .map_err(|e: String| PyValueError::new_err(format!("markings: {e}")))?,
+        );
+    }
     c.validate().map_err(err)?;
     Ok(c)
 }

@@ -1186,6 +1186,11 @@ pub fn render_scene(
         "vp3": cam.vp3(),
         "horizon": cam.horizon(),
         "bcs_scale": scale,
+        "main_road_markings": match &st.world.ground {
+            Ground::Road(r) | Ground::Cross { a: r, .. } | Ground::Parking { access: r, .. } => {
+                r.xs.markings_json()
+            }
+        },
         "pixel_convention": "pixel (i, j) covers [i, i+1) x [j, j+1); pp is the image centre",
         "spec": spec,
     });

@@ -191,6 +191,16 @@ pub struct CrossSection {
 }
 
 impl CrossSection {
+    /// Its markings as a standard: lane width, dash and gap of the lane lines, metres.
+    pub fn markings_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "lane_width_m": self.lane_w,
+            "dash_m": self.dash,
+            "gap_m": self.gap,
+            "period_m": self.dash + self.gap,
+        })
+    }
+
     pub fn half_left(&self) -> f64 {
         self.median + f64::from(self.lanes_left) * self.lane_w + self.shoulder
     }

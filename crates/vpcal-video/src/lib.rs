@@ -20,6 +20,7 @@
 //! - [`background::BackgroundSampler`]: the median of frames sampled over the input (the road
 //!   without its traffic) and [`background::scene_edgelets`], the lines it shows (VP1
 //!   evidence).
+//! - [`markings::bright_bars`]: the thin bright bars of the background (road markings).
 //!
 //! # Conventions
 //! - Frame pixels: x right, y down, origin at the top-left corner; pixel (i, j) covers
@@ -35,6 +36,7 @@ pub mod edgelets;
 pub mod edges;
 pub mod error;
 pub mod filter;
+pub mod markings;
 pub mod source;
 
 pub use detect::{Detection, Detector};

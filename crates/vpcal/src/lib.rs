@@ -28,6 +28,7 @@ pub mod crop_plan;
 pub mod detector;
 pub mod kitti;
 pub mod label;
+pub mod markings;
 pub mod model;
 pub mod output;
 pub mod overlay;

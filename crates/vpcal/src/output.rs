@@ -79,6 +79,7 @@ pub fn settings(out: &PipelineOutput, c: &PipelineConfig) -> Map<String, Value> 
         "focal": c.focal_px,
         "focal_range": c.focal_range_px,
         "max_records": c.max_records,
+        "markings": c.markings.map(|m| [m.period_m, m.lane_width_m]),
     });
     match v {
         Value::Object(m) => m,
@@ -148,25 +149,63 @@ pub fn calibrated_run_file(
     agg: &Aggregated,
     known: &[KnownDistance],
 ) -> Result<(CalibrationFile, Option<f64>, Calibration)> {
-    let file = calibration_file(out, config, cal, agg);
-    if known.is_empty() {
-        let mut file = file;
-        let boxes = crate::tracks::record_boxes(&out.records);
-        let size = (out.info.width, out.info.height);
-        let scale = set_vehicle_scale(&mut file, &boxes, size, cal, agg)?;
-        return Ok((file, scale, cal.clone()));
-    }
-    let inputs: Vec<ScaleInput> = known
+    let mut file = calibration_file(out, config, cal, agg);
+    let lines = out
+        .background
+        .as_ref()
+        .map(|bg| crate::markings::lines_in(bg, cal.vp1))
+        .unwrap_or_default();
+    let mut inputs: Vec<ScaleInput> = known
         .iter()
         .map(|k| ScaleInput {
             kind: RoadMeasure::Distance,
             known: *k,
         })
         .collect();
-    let flag = |i: usize| format!("--scale-points #{}", i + 1);
-    let mut road = RoadCamera::new(file, "the calibration")?;
-    let (_, fit) = road.apply_lengths(&inputs, flag, "the calibration", false)?;
-    Ok((road.file, Some(fit.scale), road.cal))
+    let given = inputs.len();
+    if let Some(standard) = &config.markings {
+        let marked = crate::markings::standard_lengths(&lines, cal, standard);
+        if marked.is_empty() {
+            file.warnings.push(format!(
+                "--markings: no dashed lane line of the standard was found in the scene's \
+                 background ({} lines along the road, {} dashed), so the markings gave no \
+                 lengths",
+                lines.len(),
+                lines.iter().filter(|l| l.dashes.is_some()).count()
+            ));
+        }
+        inputs.extend(marked);
+    }
+    let (mut file, scale, camera) = if inputs.is_empty() {
+        let boxes = crate::tracks::record_boxes(&out.records);
+        let size = (out.info.width, out.info.height);
+        let scale = set_vehicle_scale(&mut file, &boxes, size, cal, agg)?;
+        (file, scale, cal.clone())
+    } else {
+        let flag = |i: usize| {
+            if i < given {
+                format!("--scale-points #{}", i + 1)
+            } else {
+                format!("--markings (length {})", i - given + 1)
+            }
+        };
+        let mut road = RoadCamera::new(file, "the calibration")?;
+        if given == 0 {
+            road.lengths_source = "markings";
+        }
+        let (_, fit) = road.apply_lengths(&inputs, flag, "the calibration", false)?;
+        (road.file, Some(fit.scale), road.cal)
+    };
+    if !lines.is_empty() {
+        let summary = crate::markings::summary(&lines, &camera, scale);
+        let evidence = file
+            .evidence
+            .get_or_insert_with(|| Value::Object(Map::new()));
+        if let Value::Object(e) = evidence {
+            e.insert("markings".to_string(), summary);
+        }
+    }
+    Ok((file, scale, camera))
 }
 
 /// Everything a calibrated run writes: the calibration file (its status after the

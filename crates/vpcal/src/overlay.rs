@@ -75,6 +75,8 @@ pub struct Scene<'a> {
     pub track_lines: &'a [TrackLine],
     /// Metres per road unit, for the grid's spacing.
     pub scale_m_per_unit: Option<f64>,
+    /// The lane lines found in the scene's background ([`crate::markings`]).
+    pub markings: &'a [crate::markings::LaneLine],
 }
 
 /// The source frame index of the run's picture ([`PipelineOutput::picture`], the last frame
@@ -659,6 +661,29 @@ pub fn draw_scene(picture: &RgbImage, cal: Option<&Calibration>, scene: &Scene<'
             ));
         }
     }
+    if !scene.markings.is_empty() {
+        let w = line_width(&img);
+        let mut dashed = 0usize;
+        for l in scene.markings {
+            dashed += usize::from(l.dashes.is_some());
+            let (colour, width) = if l.dashes.is_some() {
+                (GREEN, w)
+            } else {
+                (WHITE, 0.5 * w)
+            };
+            for b in &l.bars {
+                let [p, q] = b.ends;
+                draw_line(&mut img, [p.x, p.y], [q.x, q.y], colour, width);
+            }
+        }
+        legend.push((
+            vec![Swatch::Line(GREEN), Swatch::Line(WHITE)],
+            format!(
+                "{} lines along the road in the background ({dashed} dashed / other)",
+                scene.markings.len()
+            ),
+        ));
+    }
     if let Some(cal) = cal {
         draw_horizon(&mut img, cal);
         let w = line_width(&img);
@@ -712,7 +737,12 @@ pub fn draw_run(
     scale_m_per_unit: Option<f64>,
 ) -> Option<RgbImage> {
     let picture = out.picture.as_ref()?;
+    let markings = match (cal, &out.background) {
+        (Some((c, _)), Some(bg)) => crate::markings::lines_in(bg, c.vp1),
+        _ => Vec::new(),
+    };
     let scene = Scene {
+        markings: &markings,
         picture_frame: picture_frame(out, frames),
         boxes: &out.boxes,
         records: &out.records,

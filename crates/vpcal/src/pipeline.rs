@@ -199,6 +199,9 @@ pub struct PipelineConfig {
     pub focal_range_px: Option<[f64; 2]>,
     /// At most this many vehicle records are kept ([`RecordBudget`]).
     pub max_records: usize,
+    /// The road's marking standard: its lane lines become known lengths for the focal
+    /// length and the scale ([`crate::markings`]).
+    pub markings: Option<crate::markings::MarkingStandard>,
 }
 
 impl Default for PipelineConfig {
@@ -222,6 +225,7 @@ impl Default for PipelineConfig {
             focal_px: None,
             focal_range_px: None,
             max_records: MAX_RECORDS,
+            markings: None,
         }
     }
 }
@@ -427,6 +431,9 @@ pub struct PipelineOutput {
     /// `vpcal_video::background`): the lines along the road that place VP1. Empty with
     /// `--no-edgelets`.
     pub scene_edgelets: Vec<Edgelet>,
+    /// The scene's background: the median of frames sampled over the input (grey levels),
+    /// where its road markings are found. `None` with `--no-edgelets`.
+    pub background: Option<image::GrayImage>,
     /// What the user should know about the input (a truncated video, unreadable pictures).
     pub warnings: Vec<String>,
 }
@@ -1100,9 +1107,10 @@ pub fn run_pipeline_on(
     records.sort_by_key(|r| r.frame);
     boxes.sort_by_key(|b| b.frame);
     let t = Instant::now();
+    let background = background.median();
     let scene_edgelets = background
-        .median()
-        .map_or_else(Vec::new, |bg| scene_edgelets(&bg, &scene_edgelet_options()));
+        .as_ref()
+        .map_or_else(Vec::new, |bg| scene_edgelets(bg, &scene_edgelet_options()));
     stats.stages.background += t.elapsed().as_secs_f64();
     stats.seconds = t0.elapsed().as_secs_f64();
     Ok(PipelineOutput {
@@ -1114,6 +1122,7 @@ pub fn run_pipeline_on(
         stats,
         picture: last_frame,
         scene_edgelets,
+        background,
         warnings,
     })
 }

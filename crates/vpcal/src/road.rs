@@ -19,6 +19,10 @@ pub struct RoadCamera {
     pub file: CalibrationFile,
     pub cal: Calibration,
     pub scale: Option<f64>,
+    /// What the known lengths are called where they carry the focal length or the scale
+    /// (`focal_source`, `scale_source`): `distances` (the user's), or `markings` (a marking
+    /// standard's, [`crate::markings`]).
+    pub lengths_source: &'static str,
 }
 
 impl RoadCamera {
@@ -33,7 +37,12 @@ impl RoadCamera {
         let scale = file.scale().map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
         file.check_consistency()
             .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
-        Ok(RoadCamera { file, cal, scale })
+        Ok(RoadCamera {
+            file,
+            cal,
+            scale,
+            lengths_source: "distances",
+        })
     }
 
     /// Read the calibration file at `path`.
@@ -146,7 +155,11 @@ impl RoadCamera {
         self.file
             .set_scale(fit.scale, reference)
             .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
-        self.file.scale_source = Some(fit.source.to_string());
+        self.file.scale_source = Some(if self.lengths_source == "distances" {
+            fit.source.to_string()
+        } else {
+            self.lengths_source.to_string()
+        });
         if let Some(summary) = &mut self.file.summary {
             summary.push_str(&format!(
                 "{}{:.4} m per unit from {} known {} ({})",
@@ -208,7 +221,7 @@ impl RoadCamera {
             LengthFocalFit::NotIdentified(why) => return FocalRefit::Kept(why),
             LengthFocalFit::Measured(m) => m,
         };
-        let Some(c) = combine(&m, &prior) else {
+        let Some(c) = combine(&m, &prior, self.lengths_source) else {
             let why = if prior.source == "given" {
                 format!(
                     "the focal length was given (--focal); the lengths alone give {:.0} px \

@@ -375,7 +375,8 @@ pub struct PriorFocal {
 pub struct CombinedFocal {
     pub focal_px: f64,
     pub interval_px: [f64; 2],
-    /// `distances`, or `distances+<source>` where both carried at least
+    /// The lengths' name (`distances`, `markings`), or `<name>+<source>` where both carried at
+    /// least
     /// [`MIN_SHARE`] of the weight.
     pub source: String,
     /// The lengths' share of the weight, 0-1.
@@ -393,14 +394,15 @@ fn log_sd_of(interval: [f64; 2]) -> Option<f64> {
     (lo.is_finite() && lo > 0.0 && hi > lo).then(|| 0.5 * (hi / lo).ln())
 }
 
-/// One focal length from the lengths' `m` and the calibration's `prior`, each a log-normal
+/// One focal length from the lengths' `m` (called `name` in the source) and the
+/// calibration's `prior`, each a log-normal
 /// likelihood: the inverse-variance mean in `ln f`. An assumed focal length (`prior`: the
 /// 15-90° band, uniform in `ln f`) adds nothing where the lengths are narrower than it, and
 /// is kept where they are wider (`None`); a given one (`--focal`) is kept too. Where a
 /// measured focal length and the lengths disagree by more than two standard deviations of
 /// both, they are still combined (the interval then holds neither well), and `disagreement`
 /// says so.
-pub fn combine(m: &LengthFocal, prior: &PriorFocal) -> Option<CombinedFocal> {
+pub fn combine(m: &LengthFocal, prior: &PriorFocal, name: &str) -> Option<CombinedFocal> {
     let (fm, sm) = (m.focal_px.ln(), m.log_sd.max(1e-9));
     if prior.source == "given" {
         return None;
@@ -409,7 +411,7 @@ pub fn combine(m: &LengthFocal, prior: &PriorFocal) -> Option<CombinedFocal> {
     let alone = CombinedFocal {
         focal_px: m.focal_px,
         interval_px: m.interval_px,
-        source: "distances".to_string(),
+        source: name.to_string(),
         lengths_share: 1.0,
         disagreement: None,
     };
@@ -433,11 +435,11 @@ pub fn combine(m: &LengthFocal, prior: &PriorFocal) -> Option<CombinedFocal> {
         )
     });
     let source = if share >= 1.0 - MIN_SHARE {
-        "distances".to_string()
+        name.to_string()
     } else if share < MIN_SHARE {
         prior.source.clone()
     } else {
-        format!("distances+{}", prior.source)
+        format!("{name}+{}", prior.source)
     };
     Some(CombinedFocal {
         focal_px: f,
@@ -627,28 +629,63 @@ mod tests {
     #[test]
     fn the_combination_weighs_each_focal_length_by_its_precision() {
         // Equal precision: the geometric mean, the interval narrower by sqrt(2).
-        let c = combine(&measured(1000.0, 0.1), &prior(1210.0, 0.1, "edgelets")).unwrap();
+        let c = combine(
+            &measured(1000.0, 0.1),
+            &prior(1210.0, 0.1, "edgelets"),
+            "distances",
+        )
+        .unwrap();
         assert!((c.focal_px - 1100.0).abs() < 1.0, "{}", c.focal_px);
         assert_eq!(c.source, "distances+edgelets");
         let sd = log_sd_of(c.interval_px).unwrap();
         assert!((sd - 0.1 / 2f64.sqrt()).abs() < 1e-9);
         assert!(c.disagreement.is_none());
         // Far more precise lengths carry it alone; far vaguer ones leave the footage's.
-        let c = combine(&measured(1000.0, 0.02), &prior(1300.0, 0.05, "edgelets")).unwrap();
+        let c = combine(
+            &measured(1000.0, 0.02),
+            &prior(1300.0, 0.05, "edgelets"),
+            "distances",
+        )
+        .unwrap();
         assert_eq!(c.source, "distances");
         assert!(c.disagreement.is_some(), "4.9 sd apart");
-        let c = combine(&measured(1000.0, 0.02), &prior(1300.0, 0.2, "edgelets")).unwrap();
+        let c = combine(
+            &measured(1000.0, 0.02),
+            &prior(1300.0, 0.2, "edgelets"),
+            "distances",
+        )
+        .unwrap();
         assert!(c.disagreement.is_none(), "1.3 sd apart");
-        let c = combine(&measured(300.0, 3.0), &prior(850.0, 0.2, "edgelets")).unwrap();
+        let c = combine(
+            &measured(300.0, 3.0),
+            &prior(850.0, 0.2, "edgelets"),
+            "distances",
+        )
+        .unwrap();
         assert_eq!(c.source, "edgelets");
         assert!((c.focal_px / 850.0 - 1.0).abs() < 0.01);
     }
 
     #[test]
     fn an_assumed_focal_length_gives_way_to_narrower_lengths_and_a_given_one_never() {
-        let c = combine(&measured(3000.0, 0.05), &prior(2646.0, 0.7, "prior")).unwrap();
+        let c = combine(
+            &measured(3000.0, 0.05),
+            &prior(2646.0, 0.7, "prior"),
+            "distances",
+        )
+        .unwrap();
         assert_eq!((c.focal_px, c.source.as_str()), (3000.0, "distances"));
-        assert!(combine(&measured(3000.0, 1.5), &prior(2646.0, 0.7, "prior")).is_none());
-        assert!(combine(&measured(3000.0, 0.01), &prior(2646.0, 0.0, "given")).is_none());
+        assert!(combine(
+            &measured(3000.0, 1.5),
+            &prior(2646.0, 0.7, "prior"),
+            "distances"
+        )
+        .is_none());
+        assert!(combine(
+            &measured(3000.0, 0.01),
+            &prior(2646.0, 0.0, "given"),
+            "distances"
+        )
+        .is_none());
     }
 }

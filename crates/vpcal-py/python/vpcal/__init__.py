@@ -111,6 +111,7 @@ class Options:
     focal: Optional[float] = None
     focal_range: Optional[Tuple[float, float]] = None
     max_records: Optional[int] = None
+    markings: Optional[Tuple[float, float]] = None
     scale_points: Optional[Tuple[float, float, float, float]] = None
     scale_distance: Optional[float] = None
     tracks: Optional[bool] = None

@@ -44,6 +44,11 @@ pub struct Args {
     /// `--vehicles` file, `vpcal aggregate --scene-edgelets FILE` finds the same camera.
     #[arg(long, value_name = "FILE")]
     pub scene_edgelets: Option<PathBuf>,
+    /// Also write the scene's background (the median of frames sampled over the input: the
+    /// road without its traffic), grey levels, PNG: where `calibrate --markings` finds the
+    /// lane lines, and a picture for `vpcal scale --markings --image`.
+    #[arg(long, value_name = "PNG")]
+    pub background: Option<PathBuf>,
     /// Also write the vehicle tracks: `.csv` (one row per track point: id, frame, time_s,
     /// x_px, y_px (the box's bottom centre, where the vehicle meets the road), clipped,
     /// road_x_m, road_y_m, and the track's speed_kmh, speed_uncertainty_kmh, speed_fit_kmh,
@@ -107,6 +112,7 @@ impl Args {
             ("--bcs-json", &self.bcs_json),
             ("--vehicles", &self.vehicles),
             ("--scene-edgelets", &self.scene_edgelets),
+            ("--background", &self.background),
             ("--tracks", &self.tracks),
             ("--overlay", &self.overlay),
             ("--opencv", &self.opencv),
@@ -194,6 +200,14 @@ pub struct PipelineArgs {
     /// geometric middle.
     #[arg(long, value_name = "SHORT,LONG", value_parser = super::args::focal_range, conflicts_with = "focal")]
     pub focal_range: Option<[f64; 2]>,
+    /// The road's marking standard, PERIOD,LANE in metres: the period of its dashed lane lines
+    /// (one line plus one gap: 9 for 3 + 6 m, 12.19 for the US 10 + 30 ft) and its lane width.
+    /// The lane lines found in the scene's background then measure the focal length (a period
+    /// along the road against a lane across it) and the metric scale, as --scale-points
+    /// lengths would (`focal_source`/`scale_source: markings`). Read the road's own standard:
+    /// a wrong one scales every distance and speed.
+    #[arg(long, value_name = "PERIOD,LANE")]
+    pub markings: Option<vpcal::markings::MarkingStandard>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -329,6 +343,7 @@ impl PipelineArgs {
             focal_px: self.focal,
             focal_range_px: self.focal_range,
             max_records: self.max_records,
+            markings: self.markings,
         };
         config.validate()?;
         Ok(config)
@@ -504,6 +519,12 @@ pub fn run(args: Args) -> Result<Exit> {
     }
     if let Some(path) = &args.scene_edgelets {
         output::write_scene(path, &out)?;
+    }
+    if let Some(path) = &args.background {
+        let Some(bg) = &out.background else {
+            anyhow::bail!("--background: no background was made (--no-edgelets skips it)");
+        };
+        vpcal_video::draw::save_png(&image::DynamicImage::ImageLuma8(bg.clone()).to_rgb8(), path)?;
     }
     // The tracks' summary goes to stdout, unless stdout carries the calibration's JSON.
     let say = |line: String| {

@@ -9,7 +9,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use serde_json::Value;
 use vpcal::road::{FocalRefit, KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
 
@@ -41,7 +41,9 @@ fn parse_pair(s: &str) -> Result<PointPair, String> {
     vpcal scale calib.json --lane-points 300,650,420,655 --lane-width 3.5\n  \
     # a length along the road and one across it also measure the focal length:\n  \
     vpcal scale calib.json --points 412,610,530,598 --distance 6.0 \\\n      \
-    --points 380,640,520,645 --distance 3.5\n\n\
+    --points 380,640,520,645 --distance 3.5\n  \
+    # the lane lines of a quiet frame, under the road's marking standard (period, lane):\n  \
+    vpcal scale calib.json --markings 9,3.5 --image quiet_frame.png\n\n\
 Exit codes: 0 done; 1 an error (a pixel above the horizon, a file without a camera); 2 a wrong \
 command line."
 )]
@@ -62,6 +64,15 @@ pub struct ScaleArgs {
     /// The lane width, metres: one for every --lane-points, or one per --lane-points.
     #[arg(long, value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub lane_width: Vec<f64>,
+    /// The road's marking standard, PERIOD,LANE in metres (the period of its dashed lane
+    /// lines, one line plus one gap, and its lane width; see `calibrate --markings`): the
+    /// lane lines in --image become known lengths (`markings` in the sources).
+    #[arg(long, value_name = "PERIOD,LANE", requires = "image")]
+    pub markings: Option<vpcal::markings::MarkingStandard>,
+    /// A picture of the road from the calibrated camera, its frames' size, with little
+    /// traffic (a quiet frame of the clip), where --markings finds the lane lines.
+    #[arg(long, value_name = "IMAGE", requires = "markings")]
+    pub image: Option<PathBuf>,
     /// Keep the calibration's focal length even when the lengths lie in two directions (by
     /// default they measure it: `focal_source: distances`).
     #[arg(long)]
@@ -147,9 +158,10 @@ fn scale_inputs(a: &ScaleArgs) -> Result<Vec<ScaleInput>> {
         kind: RoadMeasure::LaneWidth,
         known: known(p, *w),
     }));
-    if inputs.is_empty() {
+    if inputs.is_empty() && a.markings.is_none() {
         return Err(super::UsageError(
-            "no known length: give --points with --distance, or --lane-points with --lane-width"
+            "no known length: give --points with --distance, --lane-points with --lane-width, \
+             or --markings with --image"
                 .into(),
         )
         .into());
@@ -157,15 +169,60 @@ fn scale_inputs(a: &ScaleArgs) -> Result<Vec<ScaleInput>> {
     Ok(inputs)
 }
 
+/// The known lengths the lane lines of `image` make under marking standard `standard` on
+/// camera `f` (an error when the picture is unreadable, not of the calibration's size, or
+/// shows no dashed lane line of the standard).
+fn marking_inputs(
+    f: &RoadCamera,
+    image: &std::path::Path,
+    standard: &vpcal::markings::MarkingStandard,
+) -> Result<Vec<ScaleInput>> {
+    let grey = image::open(image)
+        .with_context(|| format!("--image {}: not a readable picture", image.display()))?
+        .to_luma8();
+    let size = [grey.width(), grey.height()];
+    if size != f.file.image_size {
+        anyhow::bail!(
+            "--image {}: {}x{} pixels, but the calibration's frames are {}x{}",
+            image.display(),
+            size[0],
+            size[1],
+            f.file.image_size[0],
+            f.file.image_size[1]
+        );
+    }
+    let lines = vpcal::markings::lines_in(&grey, f.cal.vp1);
+    let inputs = vpcal::markings::standard_lengths(&lines, &f.cal, standard);
+    if inputs.is_empty() {
+        anyhow::bail!(
+            "--image {}: no dashed lane line of the standard found ({} lines along the road, {} \
+             dashed); give known lengths with --points or --lane-points instead",
+            image.display(),
+            lines.len(),
+            lines.iter().filter(|l| l.dashes.is_some()).count()
+        );
+    }
+    Ok(inputs)
+}
+
 pub fn run_scale(a: ScaleArgs) -> Result<()> {
-    let inputs = scale_inputs(&a)?;
+    let mut inputs = scale_inputs(&a)?;
     let mut f = RoadCamera::read(&a.calib)?;
     let n_dist = a.points.len();
+    let given = inputs.len();
+    if let (Some(standard), Some(image)) = (&a.markings, &a.image) {
+        inputs.extend(marking_inputs(&f, image, standard)?);
+        if given == 0 {
+            f.lengths_source = "markings";
+        }
+    }
     let flag_of = |i: usize| {
         if i < n_dist {
             format!("--points #{}", i + 1)
-        } else {
+        } else if i < given {
             format!("--lane-points #{}", i - n_dist + 1)
+        } else {
+            format!("--markings (length {})", i - given + 1)
         }
     };
     let before = (f.cal.focal_px, f.file.focal_source.clone());
@@ -185,6 +242,7 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
             .map(|(i, m)| {
                 serde_json::json!({
                     "kind": kind(m.kind),
+                    "from": if i < given { "given" } else { "markings" },
                     "points": [[m.known.p1.x, m.known.p1.y], [m.known.p2.x, m.known.p2.y]],
                     "known_m": m.known.distance_m,
                     "own_scale": fit.own_scales[i],
