@@ -6,6 +6,7 @@ use crate::common;
 
 use common::{read_calibration, read_json, real_data, stderr, text, vpcal};
 use std::path::Path;
+use vpcal_geom::Point2;
 
 /// Files in `dir` (to check that no temporary file is left behind).
 fn names(dir: &Path) -> Vec<String> {
@@ -495,7 +496,6 @@ fn several_distances_and_lane_widths_give_one_scale_with_residuals() {
 
 #[test]
 fn known_lengths_along_and_across_the_road_measure_the_focal_length() {
-    use vpcal_geom::Point2;
     let dir = tempfile::tempdir().unwrap();
     let calib = dir.path().join("calib.json");
     write_known_calib(&calib);
@@ -550,6 +550,111 @@ fn known_lengths_along_and_across_the_road_measure_the_focal_length() {
     let v = run(&["--points", &across, "--distance", "3.5", "--keep-focal"]);
     assert_eq!(v["focal"]["changed"], false);
     assert!((read_json(&calib)["focal_px"].as_f64().unwrap() - 1000.0).abs() < 1e-6);
+}
+
+/// A picture of a road through camera `truth` at `s` metres per road unit: grey asphalt, two
+/// solid edge lines and two dashed lane lines (3 m dashes every `period` m), lanes `lane` m
+/// wide, 0.15 m lines; a white block beside the road (not a line).
+fn road_picture(
+    truth: &vpcal_geom::camera::Calibration,
+    s: f64,
+    period: f64,
+    lane: f64,
+) -> image::RgbImage {
+    let o = truth.road_point(Point2::new(640.0, 650.0)).unwrap();
+    image::RgbImage::from_fn(1280, 720, |x, y| {
+        let texture = ((x * 7 + y * 13) % 9) as u8;
+        let Some(q) = truth.road_point(Point2::new(f64::from(x) + 0.5, f64::from(y) + 0.5)) else {
+            return image::Rgb([150, 170, 200]);
+        };
+        let (along, across) = ((q[0] - o[0]) * s, (q[1] - o[1]) * s);
+        let on_line = |centre: f64| (across - centre).abs() < 0.075;
+        let solid = on_line(-2.0 * lane) || on_line(2.0 * lane);
+        let dash = (on_line(-lane) || on_line(0.0) || on_line(lane))
+            && along > -20.0
+            && (along + 20.0).rem_euclid(period) < 3.0;
+        let block = (8.0..10.0).contains(&across) && (5.0..9.0).contains(&along);
+        let v = if solid || dash || block {
+            225
+        } else {
+            85 + texture
+        };
+        image::Rgb([v, v, v])
+    })
+}
+
+#[test]
+fn a_marking_standard_measures_the_focal_length_and_the_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let calib = dir.path().join("calib.json");
+    write_known_calib(&calib);
+    let c = calib.to_str().unwrap();
+    // The true camera has the file's VP1 and horizon but f = 1400 px (the file says 1000).
+    let file = vpcal::CalibrationFile::read(&calib).unwrap();
+    let truth = vpcal::road_focal::camera_with_focal(&file.camera().unwrap(), 1400.0).unwrap();
+    let s = 0.05;
+    let picture = dir.path().join("road.png");
+    road_picture(&truth, s, 12.0, 3.5).save(&picture).unwrap();
+    let p = picture.to_str().unwrap();
+    let r = vpcal(&["scale", c, "--markings", "12,3.5", "--image", p, "--json"]);
+    assert!(r.status.success(), "{}", text(&r));
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let f = v["focal"]["focal_px"].as_f64().unwrap();
+    assert!((f / 1400.0 - 1.0).abs() < 0.03, "{v}");
+    let scale = v["scale_m_per_unit"].as_f64().unwrap();
+    assert!((scale / s - 1.0).abs() < 0.03, "{v}");
+    let rows = v["measurements"].as_array().unwrap();
+    assert!(rows.iter().all(|m| m["from"] == "markings"), "{v}");
+    let kinds = |k: &str| rows.iter().filter(|m| m["kind"] == k).count();
+    assert!(kinds("distance") >= 2 && kinds("lane_width") >= 3, "{v}");
+    let doc = read_json(&calib);
+    assert_eq!(doc["focal_source"], "markings", "{doc}");
+    assert_eq!(doc["scale_source"], "markings", "{doc}");
+    assert_eq!(v["scale_source"], "markings", "{v}");
+    // The focal length follows the ratio of period to lane: a standard with 10 % wider lanes
+    // gives another one (shorter: the road must look less foreshortened).
+    write_known_calib(&calib);
+    let r = vpcal(&["scale", c, "--markings", "12,3.85", "--image", p, "--json"]);
+    assert!(r.status.success(), "{}", text(&r));
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert!(v["focal"]["focal_px"].as_f64().unwrap() < 0.95 * f, "{v}");
+    // A picture without lane lines is an error that says so, and the file stays.
+    write_known_calib(&calib);
+    let before = std::fs::read(&calib).unwrap();
+    let blank = dir.path().join("blank.png");
+    image::RgbImage::from_pixel(1280, 720, image::Rgb([90, 90, 90]))
+        .save(&blank)
+        .unwrap();
+    let r = vpcal(&[
+        "scale",
+        c,
+        "--markings",
+        "12,3.5",
+        "--image",
+        blank.to_str().unwrap(),
+    ]);
+    assert!(!r.status.success());
+    assert!(stderr(&r).contains("no dashed lane line"), "{}", text(&r));
+    assert_eq!(std::fs::read(&calib).unwrap(), before);
+    // The wrong size, and a bad standard, are refused by name.
+    let small = dir.path().join("small.png");
+    image::RgbImage::new(640, 360).save(&small).unwrap();
+    let r = vpcal(&[
+        "scale",
+        c,
+        "--markings",
+        "12,3.5",
+        "--image",
+        small.to_str().unwrap(),
+    ]);
+    assert!(
+        !r.status.success() && stderr(&r).contains("640x360"),
+        "{}",
+        text(&r)
+    );
+    let r = vpcal(&["scale", c, "--markings", "12", "--image", p]);
+    assert_eq!(r.status.code(), Some(2), "{}", text(&r));
+    assert!(stderr(&r).contains("PERIOD,LANE"), "{}", text(&r));
 }
 
 #[test]

@@ -506,6 +506,14 @@ pub fn run(args: Args) -> Result<Exit> {
         ))
         .into());
     }
+    if args.pipeline.no_edgelets && (args.background.is_some() || args.pipeline.markings.is_some())
+    {
+        return Err(UsageError(
+            "--background and --markings need the scene's background, which --no-edgelets skips"
+                .to_string(),
+        )
+        .into());
+    }
     let config = args.pipeline.config()?;
     let bar = super::FrameBar::new("frames", args.pipeline.quiet);
     let out = vpcal::run_pipeline(&args.input, &config, &bar)?;
@@ -520,10 +528,7 @@ pub fn run(args: Args) -> Result<Exit> {
     if let Some(path) = &args.scene_edgelets {
         output::write_scene(path, &out)?;
     }
-    if let Some(path) = &args.background {
-        let Some(bg) = &out.background else {
-            anyhow::bail!("--background: no background was made (--no-edgelets skips it)");
-        };
+    if let (Some(path), Some(bg)) = (&args.background, &out.background) {
         vpcal_video::draw::save_png(&image::DynamicImage::ImageLuma8(bg.clone()).to_rgb8(), path)?;
     }
     // The tracks' summary goes to stdout, unless stdout carries the calibration's JSON.

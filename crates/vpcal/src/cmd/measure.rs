@@ -256,7 +256,7 @@ pub fn run_scale(a: ScaleArgs) -> Result<()> {
             serde_json::to_string_pretty(&serde_json::json!({
                 "focal": focal_json(focal.as_ref(), &f, &before),
                 "scale_m_per_unit": fit.scale,
-                "scale_source": fit.source,
+                "scale_source": f.file.scale_source,
                 "camera_height_m": height,
                 "measurements": rows,
                 "output": out.display().to_string(),
