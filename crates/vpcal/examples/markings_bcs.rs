@@ -5,7 +5,9 @@
 //! the reference VP1 and horizon held.
 //!
 //! `VPCAL_DATA=../shared/data cargo run --release --example markings_bcs -- [PERIOD,LANE]`
-//! (default 9,3.5: the Czech 3 + 6 m dashed line; lanes 3.5 m).
+//! (default 9,3.5: the Czech 3 + 6 m dashed line; lanes 3.5 m). `VERBOSE=1` lists each line's
+//! bars and dashes on stderr; `BARS_DIR=DIR` writes each view's bars as `DIR/VIDEO.csv` (line
+//! index, dashed, ends) to draw them; `RADIUS=R` sets the top-hat's half window at 1080p.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::PathBuf;

@@ -73,6 +73,16 @@ pub const DASH_LATTICE_TOL: f64 = 0.2;
 /// to a pixel or two, which is much of a far dash).
 pub const DASH_LENGTH_RATIO: f64 = 1.6;
 
+/// The dashes are at least this share of a line's pieces: a dashed line is mostly dashes,
+/// while a worn solid line's specks fall on a lattice only here and there (4 of 13 on
+/// BrnoCompSpeed's session3_center, 4 of 18 on session1_left).
+pub const DASH_MIN_OF_PIECES: f64 = 0.6;
+
+/// A dash is at least this share of its period, in the median over a line's dashes (a
+/// fifth to a half in the standards above; specks of a worn line's texture that happen to
+/// fall on a lattice are much shorter).
+pub const DASH_MIN_SHARE: f64 = 0.15;
+
 /// A dash is at most this share of its period (dash over line plus gap: a third in the Czech,
 /// German and UK motorway standards, a quarter in the US).
 pub const DASH_MAX_SHARE: f64 = 0.75;
@@ -279,7 +289,11 @@ fn dashes(bars: &[Bar], vp1: Point2) -> Option<Dashes> {
     let cv = residual / period;
     let span = ks[ks.len() - 1] - ks[0];
     let filled = n / (span + 1.0);
-    let regular = cv < DASH_PERIOD_MAX_CV && filled >= DASH_MIN_FILL;
+    let duty = median(members.iter().map(|m| m.1 / period).collect());
+    let regular = cv < DASH_PERIOD_MAX_CV
+        && filled >= DASH_MIN_FILL
+        && duty >= DASH_MIN_SHARE
+        && n >= DASH_MIN_OF_PIECES * items.len() as f64;
     (period > 0.0 && regular && span >= (MIN_DASHES - 1) as f64).then(|| Dashes {
         centres_u: members.iter().map(|m| m.0).collect(),
         period_u: period,

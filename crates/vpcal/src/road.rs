@@ -155,11 +155,12 @@ impl RoadCamera {
         self.file
             .set_scale(fit.scale, reference)
             .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
-        self.file.scale_source = Some(if self.lengths_source == "distances" {
+        let source = if self.lengths_source == "distances" {
             fit.source.to_string()
         } else {
             self.lengths_source.to_string()
-        });
+        };
+        self.file.scale_source = Some(source.clone());
         if let Some(summary) = &mut self.file.summary {
             summary.push_str(&format!(
                 "{}{:.4} m per unit from {} known {} ({})",
@@ -171,7 +172,7 @@ impl RoadCamera {
                 } else {
                     "lengths"
                 },
-                fit.source
+                source
             ));
         }
         self.scale = Some(fit.scale);
