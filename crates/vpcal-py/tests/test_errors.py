@@ -42,6 +42,8 @@ def test_the_same_message_as_the_cli(tmp_path, cli):
         ({"road_mask": "m.png"}, vpcal.VpcalError, "--road-mask applies to the motion detector"),
         ({"scale_points": (1, 2, 3, 4)}, ValueError, "scale_points and scale_distance go together"),
         ({"colour": "red"}, TypeError, "unknown option 'colour'"),
+        ({"markings": (9.0, 0.0)}, ValueError, "markings: expected the dash period"),
+        ({"max_records": 0}, vpcal.VpcalError, "--max-records must be at least 1"),
     ],
 )
 def test_bad_settings_name_the_setting(scene, settings, error, message):

@@ -127,7 +127,7 @@ class Options:
                 continue
             if isinstance(v, os.PathLike):
                 v = os.fspath(v)
-            if f.name in ("scale_points", "pp", "focal_range") and not isinstance(v, str):
+            if f.name in ("scale_points", "pp", "focal_range", "markings") and not isinstance(v, str):
                 v = tuple(float(x) for x in v)
             out[f.name] = v
         return out
