@@ -40,6 +40,9 @@ impl Default for BarOptions {
     }
 }
 
+/// Components wider than this many top-hat windows are not markings (see [`bright_bars`]).
+pub const MAX_WIDTH_WINDOWS: f64 = 1.5;
+
 /// One bright bar: a connected set of top-hat pixels and its principal axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Bar {
@@ -231,12 +234,18 @@ pub fn bright_bars(grey: &GrayImage, mask: Option<&GrayImage>, options: &BarOpti
         .zip(&moments)
         .filter_map(|((axis, e), m)| {
             let (c, a, minor, cov) = (*axis)?;
+            // The top-hat keeps structures narrower than its window; a component much wider is
+            // a cluster of bright texture, not a marking.
+            let width = (12.0 * minor).sqrt();
+            if width > MAX_WIDTH_WINDOWS * (2 * r + 1) as f64 {
+                return None;
+            }
             let at = |t: f64| Point2::new(c.x + a.x * t, c.y + a.y * t);
             Some(Bar {
                 centre: c,
                 axis: a,
                 length: e[1] - e[0] + 1.0,
-                width: (12.0 * minor).sqrt(),
+                width,
                 ends: [at(e[0]), at(e[1])],
                 pixels: m[0] as usize,
                 cov,

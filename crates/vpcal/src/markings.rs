@@ -91,8 +91,13 @@ pub const DASH_MAX_SHARE: f64 = 0.75;
 /// standard (see [`standard_spans`]).
 pub const STANDARD_PERIOD_SHARE: f64 = 0.85;
 
-/// Lane widths within this factor of the lanes' median count (a missed lane line doubles a
-/// lane, a shoulder or a median is no lane).
+/// A lane is measured again where both its lines are seen farthest, when that is at most this
+/// share of the nearest's distance from VP1: the lane is the same width there, so a horizon
+/// that is turned shows as a misfit, which widens the focal length's interval.
+pub const LANE_FAR_SHARE: f64 = 0.6;
+
+/// Lane widths within this factor of the narrowest of a group count as one width (a missed
+/// lane line doubles a lane, a shoulder or a median is no lane).
 pub const LANE_WIDTH_TOLERANCE: f64 = 1.33;
 
 /// A marking standard: the period of a dashed lane line (one line and one gap) and the lane
@@ -159,6 +164,8 @@ pub struct LaneLine {
     pub bars: Vec<Bar>,
     /// The pixels from VP1 of its nearest point.
     pub near_t: f64,
+    /// The pixels from VP1 of its farthest point.
+    pub far_t: f64,
     pub dashes: Option<Dashes>,
 }
 
@@ -341,11 +348,13 @@ pub fn lane_lines(bars: &[Bar], vp1: Point2) -> Vec<LaneLine> {
             });
             let direction = unit(sum)?;
             let bars: Vec<Bar> = g.iter().map(|(_, _, b)| *b).collect();
-            let near_t = bars
-                .iter()
-                .flat_map(|b| b.ends)
-                .map(|p| ((p.x - vp1.x).powi(2) + (p.y - vp1.y).powi(2)).sqrt())
-                .fold(0.0, f64::max);
+            let ts = || {
+                bars.iter()
+                    .flat_map(|b| b.ends)
+                    .map(|p| ((p.x - vp1.x).powi(2) + (p.y - vp1.y).powi(2)).sqrt())
+            };
+            let near_t = ts().fold(0.0, f64::max);
+            let far_t = ts().fold(f64::INFINITY, f64::min);
             let dashes = dashes(&bars, vp1);
             let total: f64 = bars.iter().map(|b| b.length).sum();
             if dashes.is_none() && total < LINE_MIN_LENGTH_PX {
@@ -355,6 +364,7 @@ pub fn lane_lines(bars: &[Bar], vp1: Point2) -> Vec<LaneLine> {
                 direction,
                 bars,
                 near_t,
+                far_t,
                 dashes,
             })
         })
@@ -367,43 +377,64 @@ pub fn lines_in(grey: &image::GrayImage, vp1: Point2) -> Vec<LaneLine> {
     lane_lines(&bright_bars(grey, None, &BarOptions::default()), vp1)
 }
 
-/// A lane: two neighbouring lines, at least one of them dashed, and a pixel on each.
+/// A lane: two neighbouring lines, at least one of them dashed, and a pixel on each where
+/// both are seen nearest the camera; and, where both are seen far enough away too, a pair
+/// there ([`LANE_FAR_SHARE`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Lane {
     pub lines: [usize; 2],
     pub pixels: [Point2; 2],
-    /// Its width on the camera it was found with, road units.
+    pub far_pixels: Option<[Point2; 2]>,
+    /// Its width on the camera it was found with (at `pixels`), road units.
     pub width_units: f64,
 }
 
 /// The lanes of `lines` on camera `cal`: neighbouring lines with a dashed lane line of the
-/// standard ([`standard_spans`]) among them,
-/// within [`LANE_WIDTH_TOLERANCE`] of the median width (ratios of widths across the road do
-/// not depend on the focal length, so this choice holds on any camera with the same VP1 and
-/// horizon).
+/// standard ([`standard_spans`]) among them, of the most common width (within
+/// [`LANE_WIDTH_TOLERANCE`]; the narrowest such group on a tie). Ratios of widths across the
+/// road do not depend on the focal length, so this choice holds on any camera with the same
+/// VP1 and horizon.
 pub fn lanes(lines: &[LaneLine], cal: &Calibration) -> Vec<Lane> {
-    let near = |l: &LaneLine| l.pixel_at(cal.vp1, 1.0 / l.near_t);
     let standard: Vec<usize> = standard_spans(lines, cal).iter().map(|s| s.line).collect();
     let all: Vec<Lane> = lines
         .windows(2)
         .enumerate()
         .filter(|(i, _)| standard.contains(i) || standard.contains(&(i + 1)))
         .filter_map(|(i, w)| {
-            let pixels = [near(&w[0]), near(&w[1])];
+            // Where both lines are seen: nearest, and farthest.
+            let (t_near, t_far) = (w[0].near_t.min(w[1].near_t), w[0].far_t.max(w[1].far_t));
+            let at = |t: f64| [0, 1].map(|k| w[k].pixel_at(cal.vp1, 1.0 / t));
+            let pixels = at(t_near);
             let (a, b) = (cal.road_point(pixels[0])?, cal.road_point(pixels[1])?);
             let width_units = (a[1] - b[1]).abs();
+            let far_pixels = (t_far <= LANE_FAR_SHARE * t_near)
+                .then(|| at(t_far))
+                .filter(|p| p.iter().all(|q| cal.road_point(*q).is_some()));
             (width_units.is_finite() && width_units > 0.0).then_some(Lane {
                 lines: [i, i + 1],
                 pixels,
+                far_pixels,
                 width_units,
             })
         })
         .collect();
-    let m = median(all.iter().map(|l| l.width_units).collect());
-    all.into_iter()
-        .filter(|l| {
-            l.width_units <= m * LANE_WIDTH_TOLERANCE && l.width_units * LANE_WIDTH_TOLERANCE >= m
+    // The lanes are the most common width, the narrowest where two are as common: a missed
+    // line makes a lane look twice as wide, a shoulder or a median wider, and both are rarer
+    // than the lanes themselves (ratios of widths across the road do not depend on `f`).
+    let within = |w: f64, from: f64| w >= from && w <= from * LANE_WIDTH_TOLERANCE;
+    let from = all
+        .iter()
+        .map(|l| {
+            let n = all
+                .iter()
+                .filter(|o| within(o.width_units, l.width_units))
+                .count();
+            (n, l.width_units)
         })
+        .max_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)))
+        .map_or(f64::NAN, |(_, w)| w);
+    all.into_iter()
+        .filter(|l| within(l.width_units, from))
         .collect()
 }
 
@@ -450,7 +481,7 @@ fn standard_spans(lines: &[LaneLine], cal: &Calibration) -> Vec<DashSpan> {
 }
 
 /// The known lengths standard `std` makes of `lines` on camera `cal`: one distance along each
-/// dashed line, one lane width per lane ([`lanes`]).
+/// dashed line, one or two lane widths per lane ([`lanes`]).
 pub fn standard_lengths(
     lines: &[LaneLine],
     cal: &Calibration,
@@ -464,13 +495,17 @@ pub fn standard_lengths(
             distance_m: s.periods * std.period_m,
         },
     });
-    let across = lanes(lines, cal).into_iter().map(|l| ScaleInput {
-        kind: RoadMeasure::LaneWidth,
-        known: KnownDistance {
-            p1: l.pixels[0],
-            p2: l.pixels[1],
-            distance_m: std.lane_width_m,
-        },
+    let across = lanes(lines, cal).into_iter().flat_map(|l| {
+        std::iter::once(l.pixels)
+            .chain(l.far_pixels)
+            .map(|[p1, p2]| ScaleInput {
+                kind: RoadMeasure::LaneWidth,
+                known: KnownDistance {
+                    p1,
+                    p2,
+                    distance_m: std.lane_width_m,
+                },
+            })
     });
     along.chain(across).collect()
 }
@@ -600,7 +635,8 @@ mod tests {
             lane_width_m: 3.5,
         };
         let inputs = standard_lengths(&lines, &wrong, &std);
-        assert_eq!(inputs.len(), 5);
+        // Two lane lines, three lanes measured near and far.
+        assert_eq!(inputs.len(), 8);
         let fit = crate::road_focal::fit_focal_from_lengths(
             &wrong,
             &inputs,
@@ -611,6 +647,29 @@ mod tests {
             panic!("{fit:?}");
         };
         assert!((m.focal_px / 1500.0 - 1.0).abs() < 0.01, "{m:?}");
+        // A horizon turned by 2°: no confident wrong focal length (here the view looks along
+        // the road from high up, where the roll moves f by under 1 %).
+        let dir = Point2::new(truth.horizon.0[1], -truth.horizon.0[0]);
+        let (sn, cs) = 2f64.to_radians().sin_cos();
+        let turned_dir = Point2::new(cs * dir.x - sn * dir.y, sn * dir.x + cs * dir.y);
+        let horizon = vpcal_geom::Line::through_with_direction(truth.vp1, turned_dir)
+            .unwrap_or_else(|| unreachable!());
+        let vp2 = vpcal_geom::camera::orthogonal_vp_on_line(truth.vp1, horizon, 3000.0, truth.pp)
+            .unwrap_or_else(|| unreachable!());
+        let turned =
+            Calibration::from_vps(truth.vp1, vp2, truth.pp).unwrap_or_else(|e| panic!("{e}"));
+        let inputs = standard_lengths(&lines, &turned, &std);
+        let fit = crate::road_focal::fit_focal_from_lengths(
+            &turned,
+            &inputs,
+            crate::road_focal::CameraSpread::floored(None, 1280.0),
+            1280.0,
+        );
+        let crate::road_focal::LengthFocalFit::Measured(t) = fit else {
+            panic!("{fit:?}");
+        };
+        let covers = t.interval_px[0] <= 1500.0 && 1500.0 <= t.interval_px[1];
+        assert!(covers && t.chi2 > m.chi2, "{t:?}");
     }
 
     #[test]
