@@ -123,6 +123,11 @@ pub struct VpoutArgs {
     /// comes from the VPout records alone.
     #[arg(long)]
     pub no_scene: bool,
+    /// The roads' marking standard, PERIOD,LANE in metres (as `calibrate --markings`): the
+    /// lane lines of each video's `screen.png` then measure the focal length and join each
+    /// calibration's own (`vpcal::road_focal::combine`).
+    #[arg(long, value_name = "PERIOD,LANE")]
+    pub markings: Option<vpcal::markings::MarkingStandard>,
     /// Print machine-readable JSON instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -545,6 +550,64 @@ fn print_row(name: &str, ratio: Option<&Summary>, distance: Option<&Summary>, v:
     }
 }
 
+/// The focal length the lane lines (`bars` of the screen) give under `standard` on the camera
+/// of `vp1`, `vp2` and `pp` (frames `width` wide), combined with the aggregation's focal
+/// length (`prior`: its value, interval and source): the camera's new VP2 and focal length,
+/// or `None` where the markings measure nothing.
+fn with_markings(
+    bars: &[vpcal_video::markings::Bar],
+    standard: &vpcal::markings::MarkingStandard,
+    (vp1, vp2, pp): (vpcal_geom::Point2, vpcal_geom::Point2, vpcal_geom::Point2),
+    width: f64,
+    prior: vpcal::road_focal::PriorFocal,
+) -> Option<(vpcal_geom::Point2, f64)> {
+    use vpcal::road_focal::{
+        camera_with_focal, combine, fit_focal_from_lengths, CameraSpread, LengthFocalFit,
+    };
+    let cal = vpcal_geom::camera::Calibration::from_vps(vp1, vp2, pp).ok()?;
+    let lines = vpcal::markings::lane_lines(bars, vp1);
+    let inputs = vpcal::markings::standard_lengths(&lines, &cal, standard);
+    let LengthFocalFit::Measured(m) =
+        fit_focal_from_lengths(&cal, &inputs, CameraSpread::floored(None, width), width)
+    else {
+        return None;
+    };
+    let c = combine(&m, &prior, "markings")?;
+    let camera = camera_with_focal(&cal, c.focal_px)?;
+    Some((camera.vp2, c.focal_px))
+}
+
+/// The bright bars of a BrnoCompSpeed video's `screen.png` inside its `video_mask.png`
+/// (road markings); none without a screen.
+///
+/// # Errors
+/// A screen or mask that cannot be read.
+fn video_bars(dir: &Path) -> Result<Vec<vpcal_video::markings::Bar>> {
+    let screen = dir.join("screen.png");
+    if !screen.exists() {
+        return Ok(Vec::new());
+    }
+    let grey = image::open(&screen)
+        .with_context(|| format!("reading {}", screen.display()))?
+        .to_luma8();
+    let mask_path = dir.join("video_mask.png");
+    let mask = if mask_path.exists() {
+        Some(
+            image::open(&mask_path)
+                .with_context(|| format!("reading {}", mask_path.display()))?
+                .to_luma8(),
+        )
+    } else {
+        None
+    };
+    let options = vpcal_video::markings::BarOptions::default();
+    Ok(vpcal_video::markings::bright_bars(
+        &grey,
+        mask.as_ref(),
+        &options,
+    ))
+}
+
 /// The edgelets of a BrnoCompSpeed video's `screen.png` (one frame of the video), without
 /// those where its `video_mask.png` is black; none without a screen.
 ///
@@ -600,7 +663,8 @@ pub struct VpoutResult {
 /// Unreadable directories, ground truth or VPout files; no video with both.
 pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
     let videos = split_videos(&args.dataset, args.split)?;
-    // (video, measurements, [(variant, file)], the scene's edgelets: empty without a screen)
+    // (video, measurements, [(variant, file)], the scene's edgelets: empty without a screen,
+    // the screen's bright bars with --markings)
     let mut work = Vec::new();
     let mut variants = BTreeSet::new();
     for (video, dir) in &videos {
@@ -628,7 +692,12 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             } else {
                 video_scene(dir)?
             };
-            work.push((video.clone(), gt.road_measurements(), files, scene));
+            let bars = if args.markings.is_some() {
+                video_bars(dir)?
+            } else {
+                Vec::new()
+            };
+            work.push((video.clone(), gt.road_measurements(), files, scene, bars));
         }
     }
     if work.is_empty() {
@@ -644,7 +713,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
     let jobs: Vec<(usize, String, PathBuf, Method)> = work
         .iter()
         .enumerate()
-        .flat_map(|(vi, (_, _, files, _))| {
+        .flat_map(|(vi, (_, _, files, _, _))| {
             files.iter().flat_map(move |(stem, path)| {
                 args.methods
                     .iter()
@@ -657,7 +726,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
     let outcomes: Vec<Result<Outcome>> = jobs
         .par_iter()
         .map(|(vi, stem, path, method)| {
-            let (video, measurements, _, scene) = &work[*vi];
+            let (video, measurements, _, scene, bars) = &work[*vi];
             let items = read_vpout(path)?;
             let vehicles: Vec<VehicleVps> = items.iter().map(|i| i.to_vehicle()).collect();
             // The table shows no confidence: skip the bootstrap.
@@ -674,9 +743,19 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             );
             let (row, focal) = match agg {
                 Ok(a) => {
+                    let marked = args.markings.as_ref().and_then(|standard| {
+                        let prior = vpcal::road_focal::PriorFocal {
+                            focal_px: a.focal_px,
+                            interval_px: a.focal_interval_px,
+                            source: a.focal_source.name().to_string(),
+                        };
+                        let width = f64::from(args.image_size.0);
+                        with_markings(bars, standard, (a.vp1, a.vp2, pp), width, prior)
+                    });
+                    let (vp2, focal_px) = marked.unwrap_or((a.vp2, a.focal_px));
                     let system = SystemFile::new(SystemCalibration {
                         vp1: a.vp1,
-                        vp2: a.vp2,
+                        vp2,
                         pp,
                         scale: 1.0,
                     });
@@ -691,7 +770,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                     }
                     (
                         evaluate_one(video, Some(&system), measurements, &ScaleMode::FromFile),
-                        Some(a.focal_px),
+                        Some(focal_px),
                     )
                 }
                 Err(e) => {
@@ -713,7 +792,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
         for method in &args.methods {
             let mut videos_rows = Vec::new();
             let mut focals = Vec::new();
-            for (vi, (video, measurements, _, _)) in work.iter().enumerate() {
+            for (vi, (video, measurements, _, _, _)) in work.iter().enumerate() {
                 match rows
                     .iter()
                     .find(|r| r.0 == vi && &r.1 == variant && r.2 == *method)
