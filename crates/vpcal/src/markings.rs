@@ -18,6 +18,7 @@
 
 use serde_json::{json, Value};
 use vpcal_geom::camera::Calibration;
+use vpcal_geom::solve::median;
 use vpcal_geom::Point2;
 use vpcal_video::markings::{bright_bars, Bar, BarOptions};
 
@@ -177,24 +178,15 @@ impl LaneLine {
 }
 
 fn unit(p: Point2) -> Option<Point2> {
-    let n = (p.x * p.x + p.y * p.y).sqrt();
+    let n = p.norm();
     (n > 0.0 && n.is_finite()).then(|| Point2::new(p.x / n, p.y / n))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    match v.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => v[n / 2],
-        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
 }
 
 /// The stretches of one line that `bars` cover, `[near, far]` pixels from VP1 (`t`), far
 /// first: bars that overlap or nearly touch along the line (a worn dash found in pieces) are
 /// one stretch.
 fn segments(bars: &[Bar], vp1: Point2) -> Vec<[f64; 2]> {
-    let dist = |p: Point2| ((p.x - vp1.x).powi(2) + (p.y - vp1.y).powi(2)).sqrt();
+    let dist = |p: Point2| (p - vp1).norm();
     let mut spans: Vec<[f64; 2]> = bars
         .iter()
         .map(|b| {
@@ -296,7 +288,8 @@ fn dashes(bars: &[Bar], vp1: Point2) -> Option<Dashes> {
     let cv = residual / period;
     let span = ks[ks.len() - 1] - ks[0];
     let filled = n / (span + 1.0);
-    let duty = median(members.iter().map(|m| m.1 / period).collect());
+    let duties: Vec<f64> = members.iter().map(|m| m.1 / period).collect();
+    let duty = median(&duties).unwrap_or(f64::NAN);
     let regular = cv < DASH_PERIOD_MAX_CV
         && filled >= DASH_MIN_FILL
         && duty >= DASH_MIN_SHARE
@@ -319,7 +312,7 @@ pub fn lane_lines(bars: &[Bar], vp1: Point2) -> Vec<LaneLine> {
         })
         .filter_map(|b| {
             let d = Point2::new(b.centre.x - vp1.x, b.centre.y - vp1.y);
-            let t = (d.x * d.x + d.y * d.y).sqrt();
+            let t = d.norm();
             let dir = unit(d)?;
             let cross = (dir.x * b.axis.y - dir.y * b.axis.x).abs();
             // A short dash seen obliquely is a sheared parallelogram whose principal axis
@@ -348,11 +341,7 @@ pub fn lane_lines(bars: &[Bar], vp1: Point2) -> Vec<LaneLine> {
             });
             let direction = unit(sum)?;
             let bars: Vec<Bar> = g.iter().map(|(_, _, b)| *b).collect();
-            let ts = || {
-                bars.iter()
-                    .flat_map(|b| b.ends)
-                    .map(|p| ((p.x - vp1.x).powi(2) + (p.y - vp1.y).powi(2)).sqrt())
-            };
+            let ts = || bars.iter().flat_map(|b| b.ends).map(|p| (p - vp1).norm());
             let near_t = ts().fold(0.0, f64::max);
             let far_t = ts().fold(f64::INFINITY, f64::min);
             let dashes = dashes(&bars, vp1);
@@ -517,9 +506,9 @@ pub fn summary(lines: &[LaneLine], cal: &Calibration, scale: Option<f64>) -> Val
     let spans = standard_spans(lines, cal);
     let widths: Vec<f64> = lanes(lines, cal).iter().map(|l| l.width_units).collect();
     let s = scale.unwrap_or(1.0);
-    let period =
-        (!spans.is_empty()).then(|| s * median(spans.iter().map(|x| x.period_units).collect()));
-    let lane = (!widths.is_empty()).then(|| s * median(widths.clone()));
+    let periods: Vec<f64> = spans.iter().map(|x| x.period_units).collect();
+    let period = median(&periods).map(|p| s * p);
+    let lane = median(&widths).map(|w| s * w);
     let unit = if scale.is_some() { "m" } else { "road_units" };
     json!({
         "lines": lines.len(),

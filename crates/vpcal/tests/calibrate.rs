@@ -394,6 +394,14 @@ fn write_known_calib(path: &Path) {
     std::fs::write(path, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
 }
 
+/// [`write_known_calib`] at `path`, and the true camera: the file's VP1 and horizon but
+/// f = 1400 px (the file says 1000).
+fn known_calib_and_truth(path: &Path) -> vpcal_geom::camera::Calibration {
+    write_known_calib(path);
+    let file = vpcal::CalibrationFile::read(path).unwrap();
+    vpcal::road_focal::camera_with_focal(&file.camera().unwrap(), 1400.0).unwrap()
+}
+
 #[test]
 fn several_distances_and_lane_widths_give_one_scale_with_residuals() {
     let dir = tempfile::tempdir().unwrap();
@@ -498,12 +506,9 @@ fn several_distances_and_lane_widths_give_one_scale_with_residuals() {
 fn known_lengths_along_and_across_the_road_measure_the_focal_length() {
     let dir = tempfile::tempdir().unwrap();
     let calib = dir.path().join("calib.json");
-    write_known_calib(&calib);
+    let truth = known_calib_and_truth(&calib);
     let c = calib.to_str().unwrap();
-    // The true camera has the file's VP1 and horizon but f = 1400 px (the file says 1000):
-    // road points 12 m along and 3.5 m across, seen through it (0.05 m per unit).
-    let file = vpcal::CalibrationFile::read(&calib).unwrap();
-    let truth = vpcal::road_focal::camera_with_focal(&file.camera().unwrap(), 1400.0).unwrap();
+    // Road points 12 m along and 3.5 m across, seen through the true camera (0.05 m per unit).
     let s = 0.05;
     let o = truth.road_point(Point2::new(600.0, 600.0)).unwrap();
     let px = |dx: f64, dy: f64| {
@@ -587,11 +592,8 @@ fn road_picture(
 fn a_marking_standard_measures_the_focal_length_and_the_scale() {
     let dir = tempfile::tempdir().unwrap();
     let calib = dir.path().join("calib.json");
-    write_known_calib(&calib);
+    let truth = known_calib_and_truth(&calib);
     let c = calib.to_str().unwrap();
-    // The true camera has the file's VP1 and horizon but f = 1400 px (the file says 1000).
-    let file = vpcal::CalibrationFile::read(&calib).unwrap();
-    let truth = vpcal::road_focal::camera_with_focal(&file.camera().unwrap(), 1400.0).unwrap();
     let s = 0.05;
     let picture = dir.path().join("road.png");
     road_picture(&truth, s, 12.0, 3.5).save(&picture).unwrap();
