@@ -82,6 +82,7 @@ fn main() {
                             d.centres_u.len(),
                             d.span_periods(),
                             d.cv,
+                            d.duty,
                             units,
                             cal.road_point(l.pixel_at(cal.vp1, 1.0 / l.near_t)),
                         )
@@ -97,8 +98,30 @@ fn main() {
         let fit = fit_focal_from_lengths(&cal, &inputs, CameraSpread::floored(None, width), width);
         let (f, iv) = match &fit {
             LengthFocalFit::Measured(m) => (m.focal_px, m.interval_px),
-            LengthFocalFit::NotIdentified(_) => (f64::NAN, [f64::NAN; 2]),
+            LengthFocalFit::NotIdentified(_) | LengthFocalFit::Inconsistent(_) => {
+                (f64::NAN, [f64::NAN; 2])
+            }
         };
+        if std::env::var("VERBOSE").is_ok() {
+            // Each length's residual on the fitted camera (the reference one where none fits).
+            let on = match &fit {
+                LengthFocalFit::Measured(m) => m.camera.clone(),
+                LengthFocalFit::NotIdentified(_) | LengthFocalFit::Inconsistent(_) => cal.clone(),
+            };
+            if let Ok(s) = vpcal::road::fit_scale(&on, &inputs, |i| format!("#{i}")) {
+                for (m, r) in inputs.iter().zip(&s.residuals_pct) {
+                    eprintln!(
+                        "  {:?} {:.1} m px {:.0},{:.0}-{:.0},{:.0} residual {r:+.1} %",
+                        m.kind,
+                        m.known.distance_m,
+                        m.known.p1.x,
+                        m.known.p1.y,
+                        m.known.p2.x,
+                        m.known.p2.y
+                    );
+                }
+            }
+        }
         let err = 100.0 * (f / cal.focal_px - 1.0);
         if err.is_finite() {
             errors.push(err);

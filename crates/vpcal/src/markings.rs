@@ -101,6 +101,19 @@ pub const LANE_FAR_SHARE: f64 = 0.6;
 /// lane line doubles a lane, a shoulder or a median is no lane).
 pub const LANE_WIDTH_TOLERANCE: f64 = 1.33;
 
+/// Two lines closer than this many of their painted widths bound no lane: lanes are at least
+/// 2.5 m wide and lane lines at most 0.3 m (lane separators are 0.10-0.25 m in the European,
+/// British and US standards), at least 8 widths, and blur widens a thin line's bright bar by
+/// a pixel or two. Measured (`gap_over_paint`): true lanes 12.5-33 on BrnoCompSpeed; the two
+/// edges of one wide dash (a line wider than the top-hat's window comes out hollow) and a
+/// line of specks beside a dashed line 1.7 and 4.3.
+pub const LANE_MIN_PAINT_WIDTHS: f64 = 6.0;
+
+/// The largest ratio of `u` between two edges of one painted line at the same depth: a line
+/// up to 0.5 m wide at least 5 m to the side of the camera (the lanes beside it are then
+/// 2.5 m or more farther, a factor of 1.1 for lines up to 25 m to the side).
+pub const ECHO_MAX_FACTOR: f64 = 1.1;
+
 /// A marking standard: the period of a dashed lane line (one line and one gap) and the lane
 /// width, metres. For example 9 m (3 + 6) and 3.5-3.75 m on Czech and UK motorways, 12.2 m
 /// (10 + 30 ft) and 3.66 m on US freeways, 18 m (6 + 12) and 3.75 m on German motorways: read
@@ -146,6 +159,9 @@ pub struct Dashes {
     pub period_u: f64,
     /// The spread of the gaps over the period.
     pub cv: f64,
+    /// The dashes' median length in `u` over the period: the painted share of the line,
+    /// which no camera changes (3 + 6 m: 0.33).
+    pub duty: f64,
 }
 
 impl Dashes {
@@ -298,6 +314,7 @@ fn dashes(bars: &[Bar], vp1: Point2) -> Option<Dashes> {
         centres_u: members.iter().map(|m| m.0).collect(),
         period_u: period,
         cv,
+        duty,
     })
 }
 
@@ -333,31 +350,69 @@ pub fn lane_lines(bars: &[Bar], vp1: Point2) -> Vec<LaneLine> {
             _ => groups.push(vec![bar]),
         }
     }
-    groups
+    let mut lines: Vec<LaneLine> = groups
         .into_iter()
-        .filter_map(|g| {
-            let sum = g.iter().fold(Point2::new(0.0, 0.0), |s, (a, t, _)| {
-                Point2::new(s.x + t * a.cos(), s.y + t * a.sin())
-            });
-            let direction = unit(sum)?;
-            let bars: Vec<Bar> = g.iter().map(|(_, _, b)| *b).collect();
-            let ts = || bars.iter().flat_map(|b| b.ends).map(|p| (p - vp1).norm());
-            let near_t = ts().fold(0.0, f64::max);
-            let far_t = ts().fold(f64::INFINITY, f64::min);
-            let dashes = dashes(&bars, vp1);
-            let total: f64 = bars.iter().map(|b| b.length).sum();
-            if dashes.is_none() && total < LINE_MIN_LENGTH_PX {
-                return None;
-            }
-            Some(LaneLine {
-                direction,
-                bars,
-                near_t,
-                far_t,
-                dashes,
+        .filter_map(|g| line_of(g.into_iter().map(|(_, _, b)| b).collect(), vp1))
+        .collect();
+    let echo: Vec<bool> = lines
+        .iter()
+        .map(|a| {
+            a.dashes.as_ref().is_some_and(|da| {
+                lines
+                    .iter()
+                    .filter_map(|b| b.dashes.as_ref())
+                    .any(|db| echoes(da, db))
             })
         })
+        .collect();
+    let mut echo = echo.into_iter();
+    lines.retain(|_| !echo.next().unwrap_or(false));
+    lines
+        .into_iter()
+        .filter(|l| {
+            l.dashes.is_some() || l.bars.iter().map(|b| b.length).sum::<f64>() >= LINE_MIN_LENGTH_PX
+        })
         .collect()
+}
+
+/// The line of `bars` (one group about VP1): its direction, extent and dashes.
+fn line_of(bars: Vec<Bar>, vp1: Point2) -> Option<LaneLine> {
+    let sum = bars
+        .iter()
+        .fold(Point2::new(0.0, 0.0), |s, b| s + (b.centre - vp1));
+    let direction = unit(sum)?;
+    let ts = || bars.iter().flat_map(|b| b.ends).map(|p| (p - vp1).norm());
+    let near_t = ts().fold(0.0, f64::max);
+    let far_t = ts().fold(f64::INFINITY, f64::min);
+    let dashes = dashes(&bars, vp1);
+    Some(LaneLine {
+        direction,
+        bars,
+        near_t,
+        far_t,
+        dashes,
+    })
+}
+
+/// Whether dashed line `a` is an echo of dashed line `b`: the other edge of the same dashes
+/// (a dash wider than the top-hat's window comes out as its two edges), found on every other
+/// dash only. At one depth, `u` on two lines through VP1 differs by a constant factor, the
+/// ratio of their offsets from the camera; for the two edges of one painted line that factor
+/// is within [`ECHO_MAX_FACTOR`] of 1. So `a` echoes `b` when, for some factor that close to
+/// 1, every dash of `a` lies on `b`'s lattice and `a`'s period is a whole multiple (2 or
+/// more) of `b`'s.
+fn echoes(a: &Dashes, b: &Dashes) -> bool {
+    const STEPS: i32 = 200;
+    (-STEPS..=STEPS).any(|i| {
+        let c = ECHO_MAX_FACTOR.powf(f64::from(i) / f64::from(STEPS));
+        let k = a.period_u / c / b.period_u;
+        k.round() >= 2.0
+            && (k - k.round()).abs() <= DASH_LATTICE_TOL
+            && a.centres_u.iter().all(|u| {
+                let m = (u / c - b.centres_u[0]) / b.period_u;
+                (m - m.round()).abs() <= DASH_LATTICE_TOL
+            })
+    })
 }
 
 /// The lane lines of background `grey` for a road whose VP1 is `vp1` ([`bright_bars`] with
@@ -378,6 +433,22 @@ pub struct Lane {
     pub width_units: f64,
 }
 
+/// How many of their painted widths two lines through `vp1` lie apart: at each bar of either
+/// line, the gap between the lines there over the bar's width, the median of these. Both
+/// grow in proportion to the distance from VP1, so the ratio holds along the lines and on
+/// any camera.
+pub fn gap_over_paint(a: &LaneLine, b: &LaneLine, vp1: Point2) -> f64 {
+    let sin = (a.direction.x * b.direction.y - a.direction.y * b.direction.x).abs();
+    let ratios: Vec<f64> = a
+        .bars
+        .iter()
+        .chain(&b.bars)
+        .filter(|bar| bar.width > 0.0)
+        .map(|bar| (bar.centre - vp1).norm() * sin / bar.width)
+        .collect();
+    median(&ratios).unwrap_or(f64::NAN)
+}
+
 /// The lanes of `lines` on camera `cal`: neighbouring lines with a dashed lane line of the
 /// standard ([`standard_spans`]) among them, of the most common width (within
 /// [`LANE_WIDTH_TOLERANCE`]; the narrowest such group on a tie). Ratios of widths across the
@@ -385,14 +456,21 @@ pub struct Lane {
 /// VP1 and horizon.
 pub fn lanes(lines: &[LaneLine], cal: &Calibration) -> Vec<Lane> {
     let standard: Vec<usize> = standard_spans(lines, cal).iter().map(|s| s.line).collect();
-    let all: Vec<Lane> = lines
-        .windows(2)
-        .enumerate()
-        .filter(|(i, _)| standard.contains(i) || standard.contains(&(i + 1)))
-        .filter_map(|(i, w)| {
+    // Each line and the next one at least a lane's worth of painted widths away: a tyre
+    // track or a second stripe hugging a line is one boundary with it, which the first of
+    // them in the lines' order stands for.
+    let apart =
+        |i: usize, k: usize| gap_over_paint(&lines[i], &lines[k], cal.vp1) >= LANE_MIN_PAINT_WIDTHS;
+    let neighbours = (0..lines.len())
+        .filter(|&i| (0..i).all(|j| apart(j, i)))
+        .filter_map(|i| (i + 1..lines.len()).find(|&k| apart(i, k)).map(|k| (i, k)));
+    let all: Vec<Lane> = neighbours
+        .filter(|(i, k)| standard.contains(i) || standard.contains(k))
+        .filter_map(|(i, k)| {
+            let w = [&lines[i], &lines[k]];
             // Where both lines are seen: nearest, and farthest.
             let (t_near, t_far) = (w[0].near_t.min(w[1].near_t), w[0].far_t.max(w[1].far_t));
-            let at = |t: f64| [0, 1].map(|k| w[k].pixel_at(cal.vp1, 1.0 / t));
+            let at = |t: f64| [0, 1].map(|m| w[m].pixel_at(cal.vp1, 1.0 / t));
             let pixels = at(t_near);
             let (a, b) = (cal.road_point(pixels[0])?, cal.road_point(pixels[1])?);
             let width_units = (a[1] - b[1]).abs();
@@ -400,7 +478,7 @@ pub fn lanes(lines: &[LaneLine], cal: &Calibration) -> Vec<Lane> {
                 .then(|| at(t_far))
                 .filter(|p| p.iter().all(|q| cal.road_point(*q).is_some()));
             (width_units.is_finite() && width_units > 0.0).then_some(Lane {
-                lines: [i, i + 1],
+                lines: [i, k],
                 pixels,
                 far_pixels,
                 width_units,
@@ -497,6 +575,19 @@ pub fn standard_lengths(
             })
     });
     along.chain(across).collect()
+}
+
+/// Why the known lengths `lengths` a standard made of the lines disagree with each other
+/// on every camera with `cal`'s VP1 and horizon (frames `width` pixels wide), if they do:
+/// a lane or a dash period that is none (a lattice of specks, a missed line), or a wrong
+/// horizon. Such lengths would only pull the scale between wrong values, so callers leave
+/// them out.
+pub fn disagreement(lengths: &[ScaleInput], cal: &Calibration, width: f64) -> Option<String> {
+    use crate::road_focal::{fit_focal_from_lengths, CameraSpread, LengthFocalFit};
+    match fit_focal_from_lengths(cal, lengths, CameraSpread::floored(None, width), width) {
+        LengthFocalFit::Inconsistent(why) => Some(why),
+        _ => None,
+    }
 }
 
 /// What `lines` measure on camera `cal` with metric `scale` (metres per road unit, if any):
@@ -659,6 +750,72 @@ mod tests {
         };
         let covers = t.interval_px[0] <= 1500.0 && 1500.0 <= t.interval_px[1];
         assert!(covers && t.chi2 > m.chi2, "{t:?}");
+    }
+
+    /// The lane widths (metres) that `lanes` finds in `bars` on camera `cal` of scale `s`.
+    fn lane_widths(bars: &[Bar], cal: &Calibration, s: f64) -> Vec<f64> {
+        let lines = lane_lines(bars, cal.vp1);
+        lanes(&lines, cal)
+            .iter()
+            .map(|l| s * l.width_units)
+            .collect()
+    }
+
+    #[test]
+    fn the_other_edge_of_wide_dashes_neither_doubles_the_period_nor_makes_a_lane() {
+        let cal = camera(1500.0);
+        let s = scale(&cal);
+        let m = |v: f64| v / s;
+        let mut bars = scene(&cal, s);
+        // Dashes wider than the top-hat come out as two edges; here the second edge of the
+        // first dashed line (0.3 m beside it) is found on every other dash only.
+        for k in (0..10).step_by(2) {
+            let (y0, x) = (m(12.0 + 9.0 * f64::from(k)), m(-3.5 + 0.3));
+            bars.push(bar(&cal, [y0, x], [y0 + m(3.0), x]));
+        }
+        let lines = lane_lines(&bars, cal.vp1);
+        let summary = summary(&lines, &cal, Some(s));
+        let period = summary["dash_period"].as_f64().unwrap_or(f64::NAN);
+        assert!((period - 9.0).abs() < 0.1, "{summary}");
+        let widths = lane_widths(&bars, &cal, s);
+        assert!(
+            !widths.is_empty() && widths.iter().all(|w| (w - 3.5).abs() < 0.4),
+            "{widths:?}"
+        );
+    }
+
+    #[test]
+    fn a_stripe_beside_a_line_bounds_no_lane() {
+        let cal = camera(1500.0);
+        let s = scale(&cal);
+        let m = |v: f64| v / s;
+        let mut bars = scene(&cal, s);
+        // A tyre track or a second stripe one paint width beside the first solid line.
+        let x = m(-7.0 + 0.12);
+        bars.push(bar(&cal, [m(10.0), x], [m(120.0), x]));
+        let lines = lane_lines(&bars, cal.vp1);
+        assert_eq!(lines.len(), 5, "{lines:?}");
+        let widths = lane_widths(&bars, &cal, s);
+        assert_eq!(widths.len(), 3, "{widths:?}");
+        assert!(widths.iter().all(|w| (w - 3.5).abs() < 0.2), "{widths:?}");
+    }
+
+    #[test]
+    fn lengths_no_camera_explains_are_reported() {
+        let cal = camera(1500.0);
+        let lines = lane_lines(&scene(&cal, scale(&cal)), cal.vp1);
+        let lengths = |period_m: f64, lane_width_m: f64| {
+            let std = MarkingStandard {
+                period_m,
+                lane_width_m,
+            };
+            standard_lengths(&lines, &cal, &std)
+        };
+        assert_eq!(disagreement(&lengths(9.0, 3.5), &cal, 1280.0), None);
+        // Lanes said to be ten times their width: no focal length makes them agree with the
+        // dashes (one a tenth of it still fits, at ten times the focal length).
+        let why = disagreement(&lengths(9.0, 35.0), &cal, 1280.0);
+        assert!(why.is_some_and(|w| w.contains("no focal length")));
     }
 
     #[test]

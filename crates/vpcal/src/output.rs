@@ -174,7 +174,15 @@ pub fn calibrated_run_file(
                 lines.iter().filter(|l| l.dashes.is_some()).count()
             ));
         }
-        inputs.extend(marked);
+        let width = f64::from(out.info.width);
+        match crate::markings::disagreement(&marked, cal, width) {
+            Some(why) => file.warnings.push(format!(
+                "--markings: the {} lengths the lane lines make disagree with each other on \
+                 this camera ({why}), so they were not used",
+                marked.len()
+            )),
+            None => inputs.extend(marked),
+        }
     }
     let (mut file, scale, camera) = if inputs.is_empty() {
         let boxes = crate::tracks::record_boxes(&out.records);

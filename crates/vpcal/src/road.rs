@@ -219,7 +219,9 @@ impl RoadCamera {
                 .unwrap_or_else(|| "unknown".to_string()),
         };
         let m = match fit {
-            LengthFocalFit::NotIdentified(why) => return FocalRefit::Kept(why),
+            LengthFocalFit::NotIdentified(why) | LengthFocalFit::Inconsistent(why) => {
+                return FocalRefit::Kept(why)
+            }
             LengthFocalFit::Measured(m) => m,
         };
         let Some(c) = combine(&m, &prior, self.lengths_source) else {

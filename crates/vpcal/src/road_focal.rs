@@ -97,8 +97,12 @@ pub struct LengthFocal {
 #[derive(Debug, Clone, PartialEq)]
 pub enum LengthFocalFit {
     Measured(Box<LengthFocal>),
-    /// They do not fix it, and why (one direction only; no focal length explains them).
+    /// They do not fix it, and why (one direction only, pixels that see no road).
     NotIdentified(String),
+    /// No focal length makes them agree with each other on a camera with this VP1 and
+    /// horizon (the best lies at the end of the searched range), and why: a length or a
+    /// pixel is wrong, or the horizon is.
+    Inconsistent(String),
 }
 
 /// The camera of `cal` with focal length `focal_px`: VP1, the horizon and the principal
@@ -266,7 +270,7 @@ pub fn fit_focal_from_lengths(
         cost(f).map_or(f64::INFINITY, |c| c - chi2)
     };
     if near_edge {
-        return LengthFocalFit::NotIdentified(format!(
+        return LengthFocalFit::Inconsistent(format!(
             "no focal length between {:.0} and {:.0} px makes the known lengths agree: check \
              their pixels and lengths",
             lo.exp(),

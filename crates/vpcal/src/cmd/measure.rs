@@ -202,6 +202,15 @@ fn marking_inputs(
             lines.iter().filter(|l| l.dashes.is_some()).count()
         );
     }
+    if let Some(why) = vpcal::markings::disagreement(&inputs, &f.cal, f64::from(size[0])) {
+        anyhow::bail!(
+            "--image {}: the {} lengths its lane lines make under the standard disagree with \
+             each other on this camera ({why}); check the standard, or give known lengths with \
+             --points or --lane-points instead",
+            image.display(),
+            inputs.len()
+        );
+    }
     Ok(inputs)
 }
 
