@@ -500,8 +500,9 @@ pub fn aggregate(
                     )
                 } else {
                     format!(
-                        "{what} {:.0} px (contradicts the prior: not used)",
-                        c.focal_px
+                        "{what} {:.0} px (contradicts {}: not used)",
+                        c.focal_px,
+                        contradicted_words(c.contradicts)
                     )
                 }
             };
@@ -562,6 +563,7 @@ pub fn aggregate(
                         "interval_px": c.interval_px,
                         "share": c.share,
                         "used": c.used,
+                        "contradicts": c.contradicts,
                     })
                 })
                 .collect();
@@ -641,6 +643,14 @@ pub fn aggregate(
 }
 
 /// A focal cue's name (`evidence.focal_cues[].source`) in words.
+/// What a cue left out of the focal posterior contradicts, in words.
+pub fn contradicted_words(against: Option<&str>) -> &str {
+    match against {
+        None | Some("prior") => "the prior",
+        Some(source) => cue_words(source),
+    }
+}
+
 fn cue_words(source: &str) -> &str {
     match source {
         "edgelets" => "the edges across the vehicles",

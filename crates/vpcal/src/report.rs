@@ -823,7 +823,10 @@ fn focal_section(file: &CalibrationFile) -> String {
                         num(c["share"].as_f64().map(|v| 100.0 * v), 0)
                     )
                 } else {
-                    "contradicts the prior: not used".to_string()
+                    format!(
+                        "contradicts {}: not used",
+                        crate::aggregate::contradicted_words(c["contradicts"].as_str())
+                    )
                 }
             ),
         ));

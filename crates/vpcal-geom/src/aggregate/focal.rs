@@ -7,7 +7,9 @@
 //! does not hold (one VP2 for all the rays on a curved road) is not built; one that contradicts
 //! the prior (its own focal length outside the range by more than [`CONFLICT_SD`] of its own
 //! error) is reported and left out, since it would pile the posterior against the range's end;
-//! a weak cue just adds little. Whether the result is *measured* or *assumed* is then a
+//! so is one further than that from the more informative cues (of the difference's error),
+//! since no camera fits both and their product would hold neither; a weak cue just adds
+//! little. Whether the result is *measured* or *assumed* is then a
 //! property of the evidence: measured when the used cues together carry at least as much
 //! information on `ln f` as the prior ([`measured`](FocalPosterior::measured)), and the cues
 //! that carried it are named ([`FocalPosterior::carried_by`]).
@@ -23,7 +25,8 @@
 pub const GRID: usize = 400;
 
 /// A cue whose own focal length lies outside the prior's range by more than this many of its
-/// own standard errors contradicts the prior and is left out (reported, not used).
+/// own standard errors contradicts the prior and is left out (reported, not used); so does
+/// one this many standard errors of the difference from the more informative cues.
 pub const CONFLICT_SD: f64 = 2.0;
 
 /// The least share of the cues' information for a cue to be named as carrying `f`.
@@ -123,8 +126,12 @@ pub struct CueReport {
     /// Its share of the used cues' information (their likelihoods' precisions), 0-1; 0 when
     /// not used.
     pub share: f64,
-    /// Whether it entered the posterior; `false` when it contradicts the prior.
+    /// Whether it entered the posterior; `false` when it contradicts the prior or a more
+    /// informative cue.
     pub used: bool,
+    /// What it contradicts when not used: `prior`, or the source of the more informative
+    /// cue it disagrees with.
+    pub contradicts: Option<&'static str>,
 }
 
 /// The focal length's posterior.
@@ -278,7 +285,38 @@ pub fn fuse(range_px: [f64; 2], cues: &[Cue]) -> Option<FocalPosterior> {
             )
         })
         .collect();
-    let used: Vec<bool> = cues.iter().map(|c| !conflicting(c)).collect();
+    let mut contradicts: Vec<Option<&'static str>> = cues
+        .iter()
+        .map(|c| conflicting(c).then_some("prior"))
+        .collect();
+    // Cues that contradict each other cannot both describe this camera: combined, they
+    // would give a focal length neither supports, with an interval narrower than either's.
+    // Most informative first, a cue further than CONFLICT_SD standard errors (of the
+    // difference) from the cues taken so far is left out, reported against the cue that
+    // carries most of them.
+    let mut order: Vec<usize> = (0..cues.len())
+        .filter(|&i| contradicts[i].is_none())
+        .collect();
+    order.sort_by(|&a, &b| alone[b].0.total_cmp(&alone[a].0));
+    let (mut sum_w, mut sum_wx) = (0.0, 0.0);
+    for i in order {
+        let (info, x) = (alone[i].0, cues[i].likelihood.own_px().ln());
+        if sum_w > 0.0 {
+            let mean = sum_wx / sum_w;
+            let sd = (1.0 / sum_w + 1.0 / info).sqrt();
+            if (x - mean).abs() > CONFLICT_SD * sd {
+                let strongest = (0..cues.len())
+                    .filter(|&j| contradicts[j].is_none() && j != i)
+                    .max_by(|&a, &b| alone[a].0.total_cmp(&alone[b].0))
+                    .map_or("prior", |j| cues[j].source);
+                contradicts[i] = Some(strongest);
+                continue;
+            }
+        }
+        sum_w += info;
+        sum_wx += info * x;
+    }
+    let used: Vec<bool> = contradicts.iter().map(Option::is_none).collect();
     let used_cues: Vec<&Cue> = cues
         .iter()
         .zip(&used)
@@ -302,7 +340,8 @@ pub fn fuse(range_px: [f64; 2], cues: &[Cue]) -> Option<FocalPosterior> {
         .iter()
         .zip(&alone)
         .zip(&used)
-        .map(|((c, (info, [q16, _, q84])), &u)| CueReport {
+        .zip(&contradicts)
+        .map(|(((c, (info, [q16, _, q84])), &u), &against)| CueReport {
             source: c.source,
             focal_px: c.likelihood.own_px(),
             interval_px: [*q16, *q84],
@@ -312,6 +351,7 @@ pub fn fuse(range_px: [f64; 2], cues: &[Cue]) -> Option<FocalPosterior> {
                 0.0
             },
             used: u,
+            contradicts: against,
         })
         .collect();
     let mut carried: Vec<&CueReport> = reports
@@ -396,13 +436,13 @@ mod tests {
             RANGE,
             &[
                 log_normal("edgelets", 1000.0, 0.1),
-                log_normal("network_rays", 2000.0, 0.15),
+                log_normal("network_rays", 1300.0, 0.15),
             ],
         )
         .unwrap();
-        // Inverse-variance mean in ln f: weights 100 and 44.4.
+        // 1.5 standard errors apart. Inverse-variance mean in ln f: weights 100 and 44.4.
         let (a, b) = (100.0, 1.0 / 0.0225);
-        let expect = ((a * 1000f64.ln() + b * 2000f64.ln()) / (a + b)).exp();
+        let expect = ((a * 1000f64.ln() + b * 1300f64.ln()) / (a + b)).exp();
         assert!(
             (p.focal_px / expect - 1.0).abs() < 0.01,
             "{} {expect}",
@@ -410,6 +450,28 @@ mod tests {
         );
         assert_eq!(p.carried_by, vec!["edgelets", "network_rays"]);
         assert!(p.cues[0].share > p.cues[1].share);
+    }
+
+    #[test]
+    fn of_two_cues_that_contradict_each_other_the_less_informative_is_left_out() {
+        // 0.86 apart in ln f, 2.5 standard errors of the difference (0.18 and 0.30): no
+        // camera has both; their mean would be 25 % from each with an interval holding
+        // neither.
+        let p = fuse(
+            RANGE,
+            &[
+                log_normal("network_rays", 2240.0, 0.30),
+                log_normal("edgelets", 950.0, 0.18),
+            ],
+        )
+        .unwrap();
+        assert!((p.focal_px / 950.0 - 1.0).abs() < 0.02, "{}", p.focal_px);
+        assert!(p.interval_px[0] < 950.0 && 950.0 < p.interval_px[1]);
+        assert_eq!(p.carried_by, vec!["edgelets"]);
+        let rays = &p.cues[0];
+        assert!(!rays.used && rays.share == 0.0);
+        assert_eq!(rays.contradicts, Some("edgelets"));
+        assert_eq!(p.cues[1].contradicts, None);
     }
 
     #[test]
