@@ -449,8 +449,9 @@ pub fn gap_over_paint(a: &LaneLine, b: &LaneLine, vp1: Point2) -> f64 {
     median(&ratios).unwrap_or(f64::NAN)
 }
 
-/// The lanes of `lines` on camera `cal`: neighbouring lines with a dashed lane line of the
-/// standard ([`standard_spans`]) among them, of the most common width (within
+/// The lanes of `lines` on camera `cal`: neighbouring lines (at least
+/// [`LANE_MIN_PAINT_WIDTHS`] apart) with a dashed lane line of the standard
+/// ([`standard_spans`]) among them, of the most common width (within
 /// [`LANE_WIDTH_TOLERANCE`]; the narrowest such group on a tie). Ratios of widths across the
 /// road do not depend on the focal length, so this choice holds on any camera with the same
 /// VP1 and horizon.
