@@ -642,7 +642,6 @@ pub fn aggregate(
     }
 }
 
-/// A focal cue's name (`evidence.focal_cues[].source`) in words.
 /// What a cue left out of the focal posterior contradicts, in words.
 pub fn contradicted_words(against: Option<&str>) -> &str {
     match against {
@@ -651,6 +650,7 @@ pub fn contradicted_words(against: Option<&str>) -> &str {
     }
 }
 
+/// A focal cue's name (`evidence.focal_cues[].source`) in words.
 fn cue_words(source: &str) -> &str {
     match source {
         "edgelets" => "the edges across the vehicles",

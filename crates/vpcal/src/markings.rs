@@ -578,19 +578,6 @@ pub fn standard_lengths(
     along.chain(across).collect()
 }
 
-/// Why the known lengths `lengths` a standard made of the lines disagree with each other
-/// on every camera with `cal`'s VP1 and horizon (frames `width` pixels wide), if they do:
-/// a lane or a dash period that is none (a lattice of specks, a missed line), or a wrong
-/// horizon. Such lengths would only pull the scale between wrong values, so callers leave
-/// them out.
-pub fn disagreement(lengths: &[ScaleInput], cal: &Calibration, width: f64) -> Option<String> {
-    use crate::road_focal::{fit_focal_from_lengths, CameraSpread, LengthFocalFit};
-    match fit_focal_from_lengths(cal, lengths, CameraSpread::floored(None, width), width) {
-        LengthFocalFit::Inconsistent(why) => Some(why),
-        _ => None,
-    }
-}
-
 /// What `lines` measure on camera `cal` with metric `scale` (metres per road unit, if any):
 /// the counts, the median dash period and lane width (metres with a scale, road units
 /// without), for the calibration file's `evidence.markings`.
@@ -812,10 +799,11 @@ mod tests {
             };
             standard_lengths(&lines, &cal, &std)
         };
-        assert_eq!(disagreement(&lengths(9.0, 3.5), &cal, 1280.0), None);
+        let disagreement = |l: &[ScaleInput]| crate::road_focal::disagreement(&cal, l, 1280.0);
+        assert_eq!(disagreement(&lengths(9.0, 3.5)), None);
         // Lanes said to be ten times their width: no focal length makes them agree with the
         // dashes (one a tenth of it still fits, at ten times the focal length).
-        let why = disagreement(&lengths(9.0, 35.0), &cal, 1280.0);
+        let why = disagreement(&lengths(9.0, 35.0));
         assert!(why.is_some_and(|w| w.contains("no focal length")));
     }
 

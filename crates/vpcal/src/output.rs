@@ -175,7 +175,7 @@ pub fn calibrated_run_file(
             ));
         }
         let width = f64::from(out.info.width);
-        match crate::markings::disagreement(&marked, cal, width) {
+        match crate::road_focal::disagreement(cal, &marked, width) {
             Some(why) => file.warnings.push(format!(
                 "--markings: the {} lengths the lane lines make disagree with each other on \
                  this camera ({why}), so they were not used",

@@ -232,6 +232,73 @@ fn best_log_focal(cost: &dyn Fn(f64) -> Option<f64>, lo: f64, hi: f64) -> Option
     })
 }
 
+/// The best focal length of the known lengths `inputs` on camera `cal` (frames `width` pixels
+/// wide), before any check of how well it is pinned down.
+struct BestFit {
+    /// The lengths' weights (inverse variances in `ln` length).
+    weights: Vec<f64>,
+    /// The searched range and the best point, `ln f`, and its misfit.
+    lo: f64,
+    hi: f64,
+    x: f64,
+    chi2: f64,
+}
+
+/// [`BestFit`] of `inputs`, or why there is none: too few lengths, pixels off the road, no
+/// camera ([`LengthFocalFit::NotIdentified`]), or lengths that no focal length in the range
+/// reconciles ([`LengthFocalFit::Inconsistent`]).
+fn best_fit(
+    cal: &Calibration,
+    inputs: &[ScaleInput],
+    width: f64,
+) -> Result<BestFit, LengthFocalFit> {
+    if inputs.len() < 2 {
+        return Err(LengthFocalFit::NotIdentified(
+            "one known length fixes only the scale; give a second one in another direction \
+             (across the road) to measure the focal length"
+                .to_string(),
+        ));
+    }
+    let Some(variances) = log_variances(cal, inputs) else {
+        return Err(LengthFocalFit::NotIdentified(
+            "a known length's pixels do not see the road".to_string(),
+        ));
+    };
+    let weights: Vec<f64> = variances.iter().map(|v| 1.0 / v).collect();
+    let [lo, hi] = SEARCH_RANGE_WIDTHS.map(|r| (r * width).ln());
+    let cost = |f: f64| misfit(cal.vp1, cal.horizon, cal.pp, inputs, &weights, f);
+    let Some((x, chi2)) = best_log_focal(&cost, lo, hi) else {
+        return Err(LengthFocalFit::NotIdentified(
+            "no focal length gives a camera for these lengths".to_string(),
+        ));
+    };
+    if (x - lo).min(hi - x) < 0.02 * (hi - lo) {
+        return Err(LengthFocalFit::Inconsistent(format!(
+            "no focal length between {:.0} and {:.0} px makes the known lengths agree: check \
+             their pixels and lengths",
+            lo.exp(),
+            hi.exp()
+        )));
+    }
+    Ok(BestFit {
+        weights,
+        lo,
+        hi,
+        x,
+        chi2,
+    })
+}
+
+/// Why the known lengths `inputs` disagree with each other on every camera with `cal`'s VP1
+/// and horizon (frames `width` pixels wide), if they do: a length or a pixel is wrong, or the
+/// horizon is. Such lengths would only pull the scale between wrong values.
+pub fn disagreement(cal: &Calibration, inputs: &[ScaleInput], width: f64) -> Option<String> {
+    match best_fit(cal, inputs, width) {
+        Err(LengthFocalFit::Inconsistent(why)) => Some(why),
+        _ => None,
+    }
+}
+
 /// The focal length the known lengths `inputs` give on camera `cal` (frames `width` pixels
 /// wide), with the camera's spread `spread` for the interval. See the module docs.
 pub fn fit_focal_from_lengths(
@@ -240,43 +307,25 @@ pub fn fit_focal_from_lengths(
     spread: CameraSpread,
     width: f64,
 ) -> LengthFocalFit {
-    if inputs.len() < 2 {
-        return LengthFocalFit::NotIdentified(
-            "one known length fixes only the scale; give a second one in another direction \
-             (across the road) to measure the focal length"
-                .to_string(),
-        );
-    }
-    let Some(variances) = log_variances(cal, inputs) else {
-        return LengthFocalFit::NotIdentified(
-            "a known length's pixels do not see the road".to_string(),
-        );
+    let BestFit {
+        weights,
+        lo,
+        hi,
+        x,
+        chi2,
+    } = match best_fit(cal, inputs, width) {
+        Ok(b) => b,
+        Err(why) => return why,
     };
-    let weights: Vec<f64> = variances.iter().map(|v| 1.0 / v).collect();
-    let [lo, hi] = SEARCH_RANGE_WIDTHS.map(|r| (r * width).ln());
     let solve = |vp1: Point2, horizon: Line, inputs: &[ScaleInput]| {
         let cost = |f: f64| misfit(vp1, horizon, cal.pp, inputs, &weights, f);
         best_log_focal(&cost, lo, hi)
     };
-    let Some((x, chi2)) = solve(cal.vp1, cal.horizon, inputs) else {
-        return LengthFocalFit::NotIdentified(
-            "no focal length gives a camera for these lengths".to_string(),
-        );
-    };
-    let near_edge = (x - lo).min(hi - x) < 0.02 * (hi - lo);
     let cost = |f: f64| misfit(cal.vp1, cal.horizon, cal.pp, inputs, &weights, f);
     let rise = |factor: f64| {
         let f = (x.exp() * factor).clamp(lo.exp(), hi.exp());
         cost(f).map_or(f64::INFINITY, |c| c - chi2)
     };
-    if near_edge {
-        return LengthFocalFit::Inconsistent(format!(
-            "no focal length between {:.0} and {:.0} px makes the known lengths agree: check \
-             their pixels and lengths",
-            lo.exp(),
-            hi.exp()
-        ));
-    }
     if rise(2.0) < IDENTIFIED_DELTA_CHI2 || rise(0.5) < IDENTIFIED_DELTA_CHI2 {
         return LengthFocalFit::NotIdentified(
             "the known lengths lie in one direction (or nearly): they fix the scale, not the \

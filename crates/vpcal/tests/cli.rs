@@ -623,8 +623,9 @@ fn robust_aggregation_halves_the_reference_error_on_real_cnn_outputs() {
 
 /// The lane markings of each video's screen.png under the Czech standard (9 m periods, 3.5 m
 /// lanes) on the same real CNN outputs: they measure the focal length where a lane line and
-/// a lane beside it are found, and lower every CNN's pooled ratio error. Measured when
-/// written (`--methods robust`): 12.39 / 10.22 / 9.80 % without, 11.26 / 9.04 / 7.31 % with.
+/// a lane beside it are found, and lower every CNN's pooled ratio error. Measured
+/// (`--methods robust`, 2026-12-05): 12.39 / 10.22 / 9.80 % without, 8.88 / 7.27 / 5.49 % with
+/// (docs/accuracy.md §21).
 #[test]
 fn lane_markings_lower_the_pooled_error_on_real_cnn_outputs() {
     let Some(data) = data_dir() else { return };

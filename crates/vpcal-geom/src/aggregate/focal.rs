@@ -298,21 +298,19 @@ pub fn fuse(range_px: [f64; 2], cues: &[Cue]) -> Option<FocalPosterior> {
         .filter(|&i| contradicts[i].is_none())
         .collect();
     order.sort_by(|&a, &b| alone[b].0.total_cmp(&alone[a].0));
-    let (mut sum_w, mut sum_wx) = (0.0, 0.0);
+    // The first cue taken is the most informative, the one a later cue is reported against.
+    let (mut sum_w, mut sum_wx, mut strongest): (f64, f64, Option<usize>) = (0.0, 0.0, None);
     for i in order {
         let (info, x) = (alone[i].0, cues[i].likelihood.own_px().ln());
-        if sum_w > 0.0 {
+        if let Some(first) = strongest {
             let mean = sum_wx / sum_w;
             let sd = (1.0 / sum_w + 1.0 / info).sqrt();
             if (x - mean).abs() > CONFLICT_SD * sd {
-                let strongest = (0..cues.len())
-                    .filter(|&j| contradicts[j].is_none() && j != i)
-                    .max_by(|&a, &b| alone[a].0.total_cmp(&alone[b].0))
-                    .map_or("prior", |j| cues[j].source);
-                contradicts[i] = Some(strongest);
+                contradicts[i] = Some(cues[first].source);
                 continue;
             }
         }
+        strongest = strongest.or(Some(i));
         sum_w += info;
         sum_wx += info * x;
     }

@@ -202,7 +202,7 @@ fn marking_inputs(
             lines.iter().filter(|l| l.dashes.is_some()).count()
         );
     }
-    if let Some(why) = vpcal::markings::disagreement(&inputs, &f.cal, f64::from(size[0])) {
+    if let Some(why) = vpcal::road_focal::disagreement(&f.cal, &inputs, f64::from(size[0])) {
         anyhow::bail!(
             "--image {}: the {} lengths its lane lines make under the standard disagree with \
              each other on this camera ({why}); check the standard, or give known lengths with \
