@@ -50,7 +50,8 @@ pub enum SampleMeta {
 /// Provenance and label quality of a self-labelled crop of real footage (`vpcal label`).
 ///
 /// Its VPs come from the camera that `vpcal label` estimated for the whole clip: VP1 from the
-/// vehicles' straight tracks, VP2 from that VP1, the horizon and the focal length. The label
+/// vehicles' straight tracks (or, `vp1_from_tangent`, the vehicle's own track's tangent met
+/// with the horizon), VP2 from that VP1, the horizon and the focal length. The label
 /// uncertainties are direction errors at the box centre, degrees, and set `label_weight`.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RealMeta {
@@ -77,6 +78,10 @@ pub struct RealMeta {
     pub vp1_sd_deg: f64,
     /// Uncertainty of the VP2 label's direction at the box centre, degrees.
     pub vp2_sd_deg: f64,
+    /// VP1 is the vehicle's own: its track's tangent at the box met with the horizon (a
+    /// turning vehicle, a curve, an intersection), not the camera's VP1 of the road.
+    #[serde(default)]
+    pub vp1_from_tangent: bool,
 }
 
 /// Write a crop directory's `FORMAT.md`, `config.json` (the writer's own description, with
@@ -361,6 +366,7 @@ mod tests {
                 focal_source: "prior".into(),
                 pp: [160.0, 120.0],
                 vp1_sd_deg: 0.3,
+                vp1_from_tangent: false,
                 vp2_sd_deg: 2.0,
             }),
         }

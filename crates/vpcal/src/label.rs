@@ -20,6 +20,17 @@
 //!   [`LabelSettings::max_track_residual_deg`]; the road is not called curved; the horizon's
 //!   bootstrap spread is at most [`LabelSettings::max_horizon_sd_deg`]. The input must be
 //!   consecutive frames (a video, or a folder with `--fps`): stills have no tracks.
+//! - **Vehicles that do not follow the road's one direction** (turning, changing lanes, on a
+//!   curve or through an intersection; and every vehicle of a camera refused above only for
+//!   want of one VP1 shared by the straight tracks): a moving point of the vehicle draws in the
+//!   image a curve whose tangent passes through the VP of its heading, which, as every ground
+//!   direction's, lies on the horizon. So a vehicle's own VP1 is the tangent of its track at the
+//!   box ([`local_tangent`], over [`LabelSettings::tangent_half`] boxes or more on each side) met with
+//!   the horizon, and its VP2 the point of the horizon orthogonal to it for the camera's focal
+//!   length. These need only a confident horizon (the last gate above); their VP1 uncertainty
+//!   is the tangent's standard error and [`TANGENT_FLOOR_DEG`], the box centre's own wander,
+//!   measured on straight tracks where the camera's VP1 is known (`tangent_check_deg` in the
+//!   report).
 //! - **Label quality** ([`label_uncertainty`]): the direction of each label at the box centre
 //!   is uncertain by `sd1` for VP1 (the median angle of the straight tracks to VP1: how well
 //!   one track's heading is known; VP1's bootstrap spread in pixels is not used, since for a
@@ -40,7 +51,7 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use vpcal_geom::aggregate::tracks::{link, TrackOptions};
 use vpcal_geom::camera::{orthogonal_vp_on_line, Calibration};
-use vpcal_geom::{BoxPx, Point2};
+use vpcal_geom::{BoxPx, Line, Point2};
 use vpcal_synth::{RealMeta, SampleMeta, SampleRecord};
 
 use crate::aggregate::Aggregated;
@@ -52,6 +63,18 @@ use crate::progress::Progress;
 /// the per-vehicle direction error of the paper's BoxCars-trained networks on good detections
 /// (1-2.5°), so a label counts fully only when it is better than what the network can learn.
 pub const LABEL_SD0_DEG: f64 = 2.0;
+
+/// The part of a track tangent's direction error that its fit does not show, degrees: the box
+/// centre is not one point of the vehicle (it drifts over the body as the view turns, and the
+/// detector's box jitters), so even a straight track's tangent misses the road's VP1 by this
+/// much. Measured as the median `tangent_check_deg` of `vpcal label` (tangents of straight tracks
+/// against the camera's VP1 from all of them) on the corpus cameras that pass the straight-road
+/// gates; see `models/default/MODEL.md`.
+pub const TANGENT_FLOOR_DEG: f64 = 1.0;
+
+/// Multiples of [`LabelSettings::tangent_half`] a tangent's window grows through until it
+/// spans a box height.
+const TANGENT_HALVES: [usize; 5] = [1, 2, 3, 5, 8];
 
 /// `format` of the `config.json` that `vpcal label` writes.
 pub const LABEL_FORMAT: &str = "vpcal-real-crops";
@@ -78,6 +101,15 @@ pub struct LabelSettings {
     /// At most this many crops per track, evenly spaced along it (neighbouring frames are
     /// nearly the same picture).
     pub max_per_track: usize,
+    /// Label vehicles that do not head for the road's VP1 by their track's tangent, and label
+    /// cameras without one VP1 shared by straight tracks that way when their horizon is
+    /// confident.
+    pub tangents: bool,
+    /// Boxes on each side of a box that its track's tangent is fitted over, at least (more, up
+    /// to 8 times as many, until the window travels a box height).
+    pub tangent_half: usize,
+    /// Largest standard error of a tangent's direction (degrees) for its box to be labelled.
+    pub max_tangent_sd_deg: f64,
     /// Margin added on each side of the box, in box sizes.
     pub margin: f64,
     /// JPEG quality of the crops.
@@ -96,6 +128,9 @@ impl Default for LabelSettings {
             min_box_height_px: 24.0,
             border_px: 2.0,
             max_per_track: 12,
+            tangents: true,
+            tangent_half: 3,
+            max_tangent_sd_deg: 2.0,
             margin: 0.2,
             jpeg_quality: 92,
         }
@@ -116,7 +151,16 @@ pub struct CameraReport {
     /// VP1 (the labelled vehicles).
     pub tracks: usize,
     pub vehicles: usize,
+    /// Of the labelled vehicles, those labelled by their track's tangent.
+    pub tangent_vehicles: usize,
     pub crops: usize,
+    /// Median angle between the tangents of the straight tracks and the lines to the camera's
+    /// VP1 at their boxes, degrees: the tangent labels' error where the truth is known (cameras
+    /// that pass the straight-road gates).
+    pub tangent_check_deg: Option<f64>,
+    /// Why the camera's straight tracks did not take its VPs, when every vehicle was labelled
+    /// by its track's tangent instead.
+    pub tangents_only: Option<String>,
     /// The camera's own consistency.
     pub track_lines: Option<u64>,
     pub track_residual_deg: Option<f64>,
@@ -140,7 +184,10 @@ impl CameraReport {
             boxes: 0,
             tracks: 0,
             vehicles: 0,
+            tangent_vehicles: 0,
             crops: 0,
+            tangent_check_deg: None,
+            tangents_only: None,
             track_lines: None,
             track_residual_deg: None,
             horizon_sd_deg: None,
@@ -181,24 +228,108 @@ pub struct CameraUncertainty {
     pub focal_interval_px: [f64; 2],
 }
 
-/// Direction uncertainties (degrees) of the VP1 and VP2 labels at `at` (a box centre):
-/// VP1's is the tracks' residual; VP2's from how far its
-/// direction turns when the focal length moves to either end of its interval (VP2 slides
-/// along the horizon), and the horizon's roll spread. `None` when the camera gives no VP2
-/// for an end of the interval.
+/// Direction uncertainties (degrees) of the VP1 and VP2 labels at `at` (a box centre) for the
+/// camera's own VPs: VP1's is the tracks' residual, VP2's that of [`vp2_label`].
+/// `None` when the camera gives no VP2 for an end of the focal interval.
 pub fn label_uncertainty(
     cal: &Calibration,
     at: Point2,
     u: &CameraUncertainty,
 ) -> Option<(f64, f64)> {
-    let sd1 = u.track_residual_deg;
+    let (_, sd2) = vp2_label(cal, cal.vp1, at, u)?;
+    Some((u.track_residual_deg, sd2))
+}
+
+/// The VP2 of a vehicle whose VP1 is `vp1` (on the camera's horizon): the horizon's point
+/// orthogonal to it for the camera's focal length, and its direction uncertainty at `at`, from
+/// how far that direction turns when the focal length moves to either end of its interval (VP2
+/// slides along the horizon) and the horizon's roll spread. `None` when the camera gives no
+/// VP2 for the focal length or an end of its interval.
+pub fn vp2_label(
+    cal: &Calibration,
+    vp1: Point2,
+    at: Point2,
+    u: &CameraUncertainty,
+) -> Option<(Point2, f64)> {
+    let vp2 = orthogonal_vp_on_line(vp1, cal.horizon, cal.focal_px, cal.pp)?;
     let mut turn: f64 = 0.0;
     for f in u.focal_interval_px {
-        let vp2 = orthogonal_vp_on_line(cal.vp1, cal.horizon, f, cal.pp)?;
-        turn = turn.max(direction_error_deg(at, cal.vp2, vp2));
+        let end = orthogonal_vp_on_line(vp1, cal.horizon, f, cal.pp)?;
+        turn = turn.max(direction_error_deg(at, vp2, end));
     }
-    let sd2 = (turn.powi(2) + u.horizon_sd_deg.powi(2)).sqrt();
-    Some((sd1, sd2))
+    Some((vp2, (turn.powi(2) + u.horizon_sd_deg.powi(2)).sqrt()))
+}
+
+/// A track's direction at one of its boxes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tangent {
+    /// The centre the direction is fitted around (the mean of the window's centres).
+    pub at: Point2,
+    /// Unit direction.
+    pub dir: Point2,
+    /// Standard error of the direction's angle from the centres' scatter across it, degrees.
+    pub sd_deg: f64,
+    /// How far the window's centres spread along it, pixels.
+    pub span_px: f64,
+}
+
+/// The principal axis of `points`: their mean, the unit direction, the sum of squared
+/// distances along it from the mean and across it.
+fn principal_axis(points: &[Point2]) -> Option<(Point2, Point2, f64, f64)> {
+    if points.len() < 2 {
+        return None;
+    }
+    let n = points.len() as f64;
+    let mean = points.iter().fold(Point2::new(0.0, 0.0), |a, &c| a + c) / n;
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for c in points {
+        let d = *c - mean;
+        sxx += d.x * d.x;
+        sxy += d.x * d.y;
+        syy += d.y * d.y;
+    }
+    if sxx + syy <= 0.0 {
+        return None;
+    }
+    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let dir = Point2::new(theta.cos(), theta.sin());
+    let across = Point2::new(-dir.y, dir.x);
+    let (mut along2, mut across2) = (0.0, 0.0);
+    for c in points {
+        let d = *c - mean;
+        along2 += d.dot(dir).powi(2);
+        across2 += d.dot(across).powi(2);
+    }
+    Some((mean, dir, along2, across2))
+}
+
+/// The tangent of the track through `centres` (in time order) at its `k`-th centre: the
+/// principal axis of the centres `k - half ..= k + half` (clamped to the track), its angle's
+/// standard error `atan(s / sqrt(Σ t²))` with `s²` the residual variance across it (n - 2
+/// degrees of freedom), and the window's span along it. `None` for fewer than 3 centres or
+/// centres that do not move.
+pub fn local_tangent(centres: &[Point2], k: usize, half: usize) -> Option<Tangent> {
+    if k >= centres.len() {
+        return None;
+    }
+    let lo = k.saturating_sub(half);
+    let hi = (k + half + 1).min(centres.len());
+    let window = &centres[lo..hi];
+    if window.len() < 3 {
+        return None;
+    }
+    let (at, dir, along2, across2) = principal_axis(window)?;
+    let s = (across2 / (window.len() - 2) as f64).sqrt();
+    let ts = window.iter().map(|c| (*c - at).dot(dir));
+    let (lo_t, hi_t) = ts.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
+        (a.min(t), b.max(t))
+    });
+    Some(Tangent {
+        at,
+        dir,
+        sd_deg: (s / along2.sqrt()).atan().to_degrees(),
+        span_px: hi_t - lo_t,
+    })
 }
 
 /// The crop around `b`: grown by `margin` box sizes on each side, integer pixels, clamped to
@@ -217,23 +348,7 @@ pub fn crop_rect(b: &BoxPx, margin: f64, width: u32, height: u32) -> (u32, u32, 
 /// The angle (degrees) between the principal axis of `centres` and the line from their mean
 /// to `vp1`; `None` for fewer than 2 distinct points.
 pub fn track_angle_to_vp_deg(centres: &[Point2], vp1: Point2) -> Option<f64> {
-    if centres.len() < 2 {
-        return None;
-    }
-    let n = centres.len() as f64;
-    let mean = centres.iter().fold(Point2::new(0.0, 0.0), |a, &c| a + c) / n;
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for c in centres {
-        let d = *c - mean;
-        sxx += d.x * d.x;
-        sxy += d.x * d.y;
-        syy += d.y * d.y;
-    }
-    if sxx + syy <= 0.0 {
-        return None;
-    }
-    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let dir = Point2::new(theta.cos(), theta.sin());
+    let (mean, dir, _, _) = principal_axis(centres)?;
     Some(direction_error_deg(mean, mean + dir, vp1))
 }
 
@@ -267,7 +382,12 @@ struct Wanted {
     record: usize,
     track: usize,
     instance: u32,
+    /// The labels, frame pixels, and their direction uncertainties (degrees).
+    vp1: Point2,
+    vp2: Point2,
     sd: (f64, f64),
+    /// VP1 is the track's tangent met with the horizon, not the camera's.
+    tangent: bool,
 }
 
 fn evidence_f64(agg: &Aggregated, key: &str) -> Option<f64> {
@@ -281,8 +401,9 @@ fn evidence_bool(agg: &Aggregated, key: &str) -> bool {
         .unwrap_or(false)
 }
 
-/// The first gate the camera fails, as a sentence; `None` when it may be labelled.
-fn refusal(agg: &Aggregated, settings: &LabelSettings) -> Option<String> {
+/// The first gate of a road whose straight tracks share the camera's VP1 that the camera
+/// fails, as a sentence; `None` when its straight tracks may take the camera's VPs.
+fn straight_road_refusal(agg: &Aggregated, settings: &LabelSettings) -> Option<String> {
     if evidence_bool(agg, "road_curved") {
         return Some("the road curves: vehicles do not share one VP1".into());
     }
@@ -313,6 +434,11 @@ fn refusal(agg: &Aggregated, settings: &LabelSettings) -> Option<String> {
         }
         None => return Some("no track residual".into()),
     }
+    None
+}
+
+/// Why the camera's horizon is not confident enough for any label; `None` when it is.
+fn horizon_refusal(agg: &Aggregated, settings: &LabelSettings) -> Option<String> {
     match agg.confidence.as_ref().map(|c| c.horizon_angle_sd_deg) {
         Some(sd) if sd.is_finite() && sd <= settings.max_horizon_sd_deg => None,
         Some(sd) => Some(format!(
@@ -367,10 +493,21 @@ pub fn label_footage(
     report.focal_px = Some(cal.focal_px);
     report.focal_source = Some(agg.focal_source.name().to_string());
     report.focal_interval_px = agg.focal_interval_px;
-    if let Some(why) = refusal(&agg, settings) {
+    if let Some(why) = horizon_refusal(&agg, settings) {
         report.refused = Some(why);
         return Ok((report, Vec::new()));
     }
+    let shared_vp1 = match straight_road_refusal(&agg, settings) {
+        None => true,
+        Some(why) if !settings.tangents => {
+            report.refused = Some(why);
+            return Ok((report, Vec::new()));
+        }
+        Some(why) => {
+            report.tangents_only = Some(why);
+            false
+        }
+    };
     let uncertainty = CameraUncertainty {
         track_residual_deg: report.track_residual_deg.unwrap_or(0.0),
         horizon_sd_deg: report.horizon_sd_deg.unwrap_or(0.0),
@@ -378,7 +515,13 @@ pub fn label_footage(
             .focal_interval_px
             .unwrap_or([cal.focal_px, cal.focal_px]),
     };
-    let wanted = choose_boxes(&out.records, &cal, &uncertainty, settings, &mut report, {
+    let choice = Choice {
+        cal: &cal,
+        uncertainty: &uncertainty,
+        settings,
+        shared_vp1,
+    };
+    let wanted = choose_boxes(&out.records, &choice, &mut report, {
         let (w, h) = (out.info.width, out.info.height);
         move |b: &BoxPx| {
             b.x0 > settings.border_px
@@ -388,7 +531,11 @@ pub fn label_footage(
         }
     });
     if wanted.is_empty() {
-        report.refused = Some("no moving vehicle heads for VP1 on a long enough track".into());
+        report.refused = Some(if shared_vp1 || !settings.tangents {
+            "no moving vehicle heads for VP1 on a long enough track".into()
+        } else {
+            "no moving vehicle's track has a tangent straight enough to label".into()
+        });
         return Ok((report, Vec::new()));
     }
     let records = cut_crops(
@@ -419,16 +566,31 @@ pub fn label_footage(
     Ok((report, records))
 }
 
-/// The boxes to label: on tracks of moving vehicles that head for VP1, inside the frame,
-/// large enough, at most `max_per_track` a track.
+/// What [`choose_boxes`] labels with.
+struct Choice<'a> {
+    cal: &'a Calibration,
+    uncertainty: &'a CameraUncertainty,
+    settings: &'a LabelSettings,
+    /// Straight tracks that head for the camera's VP1 take the camera's VPs (the camera passed
+    /// the straight-road gates); otherwise every vehicle is labelled by its track's tangent.
+    shared_vp1: bool,
+}
+
+/// The boxes to label, at most `max_per_track` a track of a moving vehicle, inside the frame
+/// and large enough: those of straight tracks that head for VP1 with the camera's VPs, the
+/// others (with `tangents`) with the VPs of their track's tangent where it is straight enough.
 fn choose_boxes(
     records: &[VehicleRecord],
-    cal: &Calibration,
-    u: &CameraUncertainty,
-    settings: &LabelSettings,
+    choice: &Choice<'_>,
     report: &mut CameraReport,
     inside: impl Fn(&BoxPx) -> bool,
 ) -> Vec<Wanted> {
+    let Choice {
+        cal,
+        uncertainty,
+        settings,
+        shared_vp1,
+    } = *choice;
     let boxes: Vec<(f64, BoxPx)> = records
         .iter()
         .map(|r| (r.frame as f64, r.det_box))
@@ -438,6 +600,7 @@ fn choose_boxes(
         ..TrackOptions::default()
     };
     let mut wanted = Vec::new();
+    let mut checks = Vec::new();
     for (t, track) in link(&boxes, &options).iter().enumerate() {
         if track.len() < settings.min_track_boxes {
             continue;
@@ -453,36 +616,70 @@ fn choose_boxes(
         if travel < settings.min_travel_heights * height {
             continue;
         }
-        match track_angle_to_vp_deg(&centres, cal.vp1) {
-            Some(a) if a <= settings.max_track_angle_deg => {}
-            _ => continue,
+        let straight = shared_vp1
+            && track_angle_to_vp_deg(&centres, cal.vp1)
+                .is_some_and(|a| a <= settings.max_track_angle_deg);
+        if !straight && !settings.tangents {
+            continue;
         }
-        let usable: Vec<usize> = track
-            .iter()
-            .copied()
-            .filter(|&i| {
-                let b = &records[i].det_box;
+        // A tangent counts where its window travels a box height and its direction is known:
+        // the window grows until it travels that far (slow and far vehicles move little from
+        // one frame to the next), and a bend then shows as scatter across it.
+        let tangent_at = |p: usize| {
+            let min_span = settings.min_travel_heights * heights[p];
+            TANGENT_HALVES
+                .iter()
+                .map(|&k| k * settings.tangent_half)
+                .filter_map(|half| local_tangent(&centres, p, half))
+                .find(|tg| tg.span_px >= min_span)
+                .filter(|tg| tg.sd_deg <= settings.max_tangent_sd_deg)
+        };
+        let usable: Vec<usize> = (0..track.len())
+            .filter(|&p| {
+                let b = &records[track[p]].det_box;
                 b.height() >= settings.min_box_height_px && inside(b)
             })
             .collect();
-        let picked = spread_evenly(usable.len(), settings.max_per_track);
-        if picked.is_empty() {
-            continue;
-        }
-        report.vehicles += 1;
-        for (k, p) in picked.into_iter().enumerate() {
-            let record = usable[p];
-            let Some(sd) = label_uncertainty(cal, records[record].det_box.center(), u) else {
+        let mut labelled = 0;
+        for p in spread_evenly(usable.len(), settings.max_per_track) {
+            let pos = usable[p];
+            let record = track[pos];
+            let at = records[record].det_box.center();
+            let label = if straight {
+                if let Some(tg) = tangent_at(pos) {
+                    checks.push(direction_error_deg(tg.at, tg.at + tg.dir, cal.vp1));
+                }
+                label_uncertainty(cal, at, uncertainty).map(|sd| (cal.vp1, cal.vp2, sd))
+            } else {
+                tangent_at(pos).and_then(|tg| {
+                    let vp1 =
+                        Line::through_with_direction(tg.at, tg.dir)?.intersect(cal.horizon)?;
+                    let (vp2, sd2) = vp2_label(cal, vp1, at, uncertainty)?;
+                    Some((vp1, vp2, (tg.sd_deg.hypot(TANGENT_FLOOR_DEG), sd2)))
+                })
+            };
+            let Some((vp1, vp2, sd)) = label else {
                 continue;
             };
             wanted.push(Wanted {
                 record,
                 track: t,
-                instance: k as u32,
+                instance: labelled,
+                vp1,
+                vp2,
                 sd,
+                tangent: !straight,
             });
+            labelled += 1;
+        }
+        if labelled > 0 {
+            report.vehicles += 1;
+            if !straight {
+                report.tangent_vehicles += 1;
+            }
         }
     }
+    report.tangent_check_deg = vpcal_geom::solve::median(&checks);
     wanted
 }
 
@@ -558,8 +755,8 @@ fn cut_crops(
                 bb3d: [
                     rect[0], rect[1], rect[2], rect[3], rect[0], rect[1], rect[2], rect[3],
                 ],
-                vp1: rel(cal.vp1),
-                vp2: rel(cal.vp2),
+                vp1: rel(w.vp1),
+                vp2: rel(w.vp2),
                 box2d: box_rel,
                 label_weight: weights,
                 meta: SampleMeta::Real(RealMeta {
@@ -576,6 +773,7 @@ fn cut_crops(
                     pp: cal.pp.as_array(),
                     vp1_sd_deg: w.sd.0,
                     vp2_sd_deg: w.sd.1,
+                    vp1_from_tangent: w.tangent,
                 }),
             });
         }
@@ -619,6 +817,51 @@ mod tests {
         let b = BoxPx::new(10.0, 20.0, 30.0, 60.0);
         assert_eq!(crop_rect(&b, 0.25, 100, 100), (5, 10, 35, 70));
         assert_eq!(crop_rect(&b, 1.0, 40, 70), (0, 0, 40, 70));
+    }
+
+    #[test]
+    fn a_track_tangent_follows_a_curve() {
+        // Centres on a circle of radius 200 about (500, 500), 2° apart: the tangent at each is
+        // square to the radius, its window spans ~6 steps, and its error is small.
+        let c = Point2::new(500.0, 500.0);
+        let pts: Vec<Point2> = (0..20)
+            .map(|i| {
+                let a = f64::from(i).mul_add(2.0, 10.0).to_radians();
+                c + Point2::new(a.cos(), a.sin()) * 200.0
+            })
+            .collect();
+        for k in [0, 7, 19] {
+            let tg = local_tangent(&pts, k, 3).unwrap();
+            let mid = tg.at - c;
+            assert!(mid.dot(tg.dir).abs() / mid.norm() < 0.02, "k {k}: {tg:?}");
+            // The arc bends across the window: its sagitta counts as scatter.
+            assert!(tg.sd_deg < 1.0, "{tg:?}");
+        }
+        let tg = local_tangent(&pts, 7, 3).unwrap();
+        assert!(
+            (tg.span_px - 6.0 * 2f64.to_radians() * 200.0).abs() < 1.0,
+            "{tg:?}"
+        );
+        assert!(local_tangent(&pts[..2], 0, 3).is_none());
+        assert!(local_tangent(&[Point2::new(1.0, 1.0); 5], 2, 3).is_none());
+    }
+
+    #[test]
+    fn a_tangent_s_error_grows_with_the_scatter_across_it() {
+        // A straight track along x with alternating offsets across it: the direction stays x,
+        // the standard error grows with the offsets and falls with the window's length.
+        let track = |dy: f64, step: f64| -> Vec<Point2> {
+            (0..9)
+                .map(|i| Point2::new(f64::from(i) * step, if i % 2 == 0 { dy } else { -dy }))
+                .collect()
+        };
+        let sd = |dy, step, half| local_tangent(&track(dy, step), 4, half).unwrap().sd_deg;
+        assert!(sd(0.0, 10.0, 3) < 1e-9);
+        assert!(sd(1.0, 10.0, 3) > sd(0.5, 10.0, 3));
+        assert!(sd(1.0, 20.0, 3) < sd(1.0, 10.0, 3));
+        assert!(sd(1.0, 10.0, 4) < sd(1.0, 10.0, 2));
+        let tg = local_tangent(&track(1.0, 10.0), 4, 3).unwrap();
+        assert!(tg.dir.y.abs() < 0.05, "{tg:?}");
     }
 
     #[test]

@@ -17,8 +17,9 @@ use super::{Exit, FrameBar, UsageError};
 Exit codes: 0 done; 1 an error; 2 a wrong command line; 3 no input could be labelled."
 )]
 pub struct Args {
-    /// Videos (or image folders with --fps) of fixed cameras looking at straight roads; each
-    /// is one camera, named after its file stem.
+    /// Videos (or image folders with --fps) of fixed cameras; each is one camera, named after
+    /// its file stem. Straight roads label best; curves and intersections by the tracks'
+    /// tangents.
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
     /// Folder for the crops (`images/<camera>/`), `samples.jsonl`, `config.json`,
@@ -31,6 +32,11 @@ pub struct Args {
     /// Refuse a camera whose straight tracks point at VP1 worse than this (median, degrees).
     #[arg(long, default_value_t = LabelSettings::default().max_track_residual_deg)]
     pub max_track_residual: f64,
+    /// Label only the vehicles of straight tracks that head for the road's VP1, with the
+    /// camera's VPs: no vehicle by its own track's tangent, and no camera whose straight tracks
+    /// do not share one VP1 (curves, intersections).
+    #[arg(long)]
+    pub no_tangents: bool,
     #[command(flatten)]
     pub pipeline: PipelineArgs,
     /// Print the per-camera report as JSON on stdout.
@@ -44,6 +50,7 @@ pub fn run(a: Args) -> Result<Exit> {
     let settings = LabelSettings {
         max_per_track: a.per_track,
         max_track_residual_deg: a.max_track_residual,
+        tangents: !a.no_tangents,
         ..LabelSettings::default()
     };
     if a.output.join("samples.jsonl").exists() {
@@ -128,8 +135,9 @@ fn print_report(r: &CameraReport) {
     let f = |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |v| format!("{v:.2}{unit}"));
     eprintln!("vpcal label: {} ({})", r.camera, r.source);
     eprintln!(
-        "  frames {}, boxes {}, tracks {}, labelled vehicles {}, crops {}",
-        r.frames, r.boxes, r.tracks, r.vehicles, r.crops
+        "  frames {}, boxes {}, tracks {}, labelled vehicles {} ({} by their track's tangent), \
+         crops {}",
+        r.frames, r.boxes, r.tracks, r.vehicles, r.tangent_vehicles, r.crops
     );
     eprintln!(
         "  camera: {} straight tracks at {} from VP1, horizon ±{}, focal {} ({})",
@@ -139,6 +147,12 @@ fn print_report(r: &CameraReport) {
         f(r.focal_px, " px"),
         r.focal_source.as_deref().unwrap_or("-")
     );
+    if let Some(t) = r.tangent_check_deg {
+        eprintln!("  straight tracks' tangents miss VP1 by {t:.2}° (median)");
+    }
+    if let (None, Some(why)) = (&r.refused, &r.tangents_only) {
+        eprintln!("  every vehicle by its track's tangent: {why}");
+    }
     match &r.refused {
         Some(why) => eprintln!("  REFUSED: {why}"),
         None => eprintln!(
