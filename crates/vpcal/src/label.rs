@@ -70,9 +70,9 @@ pub const LABEL_SD0_DEG: f64 = 2.0;
 /// centre is not one point of the vehicle (it drifts over the body as the view turns, occluders
 /// cut the box, the detector's box jitters). Measured with `vpcal label --every 2` on the six
 /// corpus cameras that pass the straight-road gates: every moving track's tangent misses the
-/// camera's VP1 by a median of 0.65, 1.00, 1.05, 1.13, 1.26 and 3.27° (`tangent_check_deg`;
-/// the last a dense telephoto queue), median 1.09°, the median absolute value of a normal
-/// error of 1.6°; less the fits' own standard errors (about 0.6°), 1.5°.
+/// camera's VP1 by a median of 0.74, 0.92, 1.00, 1.24, 1.59 and 3.13° (`tangent_check_deg`;
+/// the last a dense telephoto queue), median 1.12°, the median absolute value of a normal
+/// error of 1.7°; less the fits' own standard errors (about 0.6°), 1.5°.
 pub const TANGENT_FLOOR_DEG: f64 = 1.5;
 
 /// Multiples of [`LabelSettings::tangent_half`] a tangent's window grows through until it
