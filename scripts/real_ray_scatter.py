@@ -7,11 +7,14 @@ straight tracks give (the calibration of the first model, when its `evidence.vp1
 is true; the tracks come from the detector's boxes, not from the network). Each record's
 error is the angle, at its box centre, between the line to its predicted VP1 and the line to
 the reference VP1 (lines, so at most 90°). Printed per clip and model: the median and the
-90th percentile over the records, and their count.
+90th percentile over the records, and their count; with `--split-px S`, also the medians of the
+records whose box's larger side (`box_scale`) is under S pixels and of the others (most rays on
+far cameras come from small vehicles, where the network sees little).
 
 Usage:
   scripts/real_ray_scatter.py --vpcal target/release/vpcal --out OUT \
-      --model bundled --model run/model.safetensors [--every 2] [--max-frames 300] CLIP...
+      --model bundled --model run/model.safetensors [--every 2] [--max-frames 300] \
+      [--split-px 45] CLIP...
 
 `--model bundled` is the model built into the binary. Clips whose tracks do not give VP1
 are reported as such (no reference).
@@ -69,6 +72,8 @@ def main():
     ap.add_argument("--every", type=int, default=1)
     ap.add_argument("--max-frames", type=int, default=0)
     ap.add_argument("--json", help="also write the table here")
+    ap.add_argument("--split-px", type=float, default=0.0,
+                    help="also the medians below and from this box size (larger side, pixels)")
     ap.add_argument("clips", nargs="+")
     a = ap.parse_args()
     rows = []
@@ -83,20 +88,31 @@ def main():
                 ev = (calib or {}).get("evidence", {})
                 if calib and calib.get("vp1") and ev.get("vp1_from_tracks"):
                     ref = calib["vp1"]
-            errs = []
+            errs, small, large = [], [], []
             if ref is not None:
                 for it in items:
                     vp1, at = it.get("vp1"), it.get("box_center")
                     if vp1 is None or at is None or any(v is None for v in vp1 + at):
                         continue
-                    errs.append(angle_deg(at, vp1, ref))
+                    e = angle_deg(at, vp1, ref)
+                    errs.append(e)
+                    size = max(it.get("box_scale") or [0.0])
+                    (small if size < a.split_px else large).append(e)
             med, p90 = percentile(errs, 0.5), percentile(errs, 0.9)
             label = os.path.basename(os.path.dirname(model)) + "/" + os.path.basename(model) if model != "bundled" else "bundled"
             print(f"{name:<44} {label[-28:]:<28} {code:>4} {len(errs):>6} {med:>7.2f} {p90:>7.2f}  "
                   f"{'tracks' if ref is not None else 'none (VP1 not from tracks)'}")
+            if a.split_px > 0 and errs:
+                print(f"{'':<44} {'':<28} {'':>4} {'':>6}  < {a.split_px:g} px: "
+                      f"{percentile(small, 0.5):.2f} ({len(small)}), from it: "
+                      f"{percentile(large, 0.5):.2f} ({len(large)})")
             rows.append({"clip": name, "model": model, "exit": code, "records": len(errs),
                          "median_deg": med if errs else None, "p90_deg": p90 if errs else None,
-                         "reference_vp1": ref})
+                         "reference_vp1": ref,
+                         "small_median_deg": percentile(small, 0.5) if small else None,
+                         "small_records": len(small),
+                         "large_median_deg": percentile(large, 0.5) if large else None,
+                         "large_records": len(large)})
             sys.stdout.flush()
     if a.json:
         with open(a.json, "w") as f:
