@@ -304,9 +304,9 @@ fn principal_axis(points: &[Point2]) -> Option<(Point2, Point2)> {
 /// centres `k - half ..= k + half` (shifted inside the track near its ends), in the frame of
 /// their principal axis (`t` along, `e` across), `e = a + b t + c t²` is fitted by least
 /// squares (a line for fewer than 5 centres), so that a bend and a window at the track's end
-/// still give the direction at the box itself: the slope `b + 2 c t_k`, its angle's standard error from the
-/// fit's residual variance and covariance, and the window's span along the axis. `None` for
-/// fewer than 3 centres, centres that do not move, or a singular fit.
+/// still give the direction at the box itself: the slope `b + 2 c t_k`, its angle's standard
+/// error from the fit's residual variance and covariance, and the window's span along the axis.
+/// `None` for fewer than 3 centres, centres that do not move, or a singular fit.
 pub fn local_tangent(centres: &[Point2], k: usize, half: usize) -> Option<Tangent> {
     if k >= centres.len() {
         return None;
