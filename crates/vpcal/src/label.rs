@@ -51,7 +51,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use vpcal_geom::aggregate::tracks::{link, TrackOptions};
+use vpcal_geom::aggregate::tracks::{link, Axis, TrackOptions};
 use vpcal_geom::camera::{orthogonal_vp_on_line, Calibration};
 use vpcal_geom::{BoxPx, Line, Point2};
 use vpcal_synth::{RealMeta, SampleMeta, SampleRecord};
@@ -279,25 +279,11 @@ pub struct Tangent {
     pub span_px: f64,
 }
 
-/// The principal axis of `points`: their mean and unit direction.
+/// The principal axis of `points` ([`Axis`]): their mean and unit direction; `None` for fewer
+/// than 2 points or points that do not spread.
 fn principal_axis(points: &[Point2]) -> Option<(Point2, Point2)> {
-    if points.len() < 2 {
-        return None;
-    }
-    let n = points.len() as f64;
-    let mean = points.iter().fold(Point2::new(0.0, 0.0), |a, &c| a + c) / n;
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for c in points {
-        let d = *c - mean;
-        sxx += d.x * d.x;
-        sxy += d.x * d.y;
-        syy += d.y * d.y;
-    }
-    if sxx + syy <= 0.0 {
-        return None;
-    }
-    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    Some((mean, Point2::new(theta.cos(), theta.sin())))
+    let axis = Axis::of(points);
+    (points.len() >= 2 && axis.major_rms > 0.0).then_some((axis.mean, axis.dir))
 }
 
 /// The tangent of the track through `centres` (in time order) at its `k`-th centre. Over the
@@ -943,16 +929,7 @@ mod tests {
             .zip(frame0..)
             .map(|(c, frame)| {
                 let b = BoxPx::new(c.x - 20.0, c.y - 15.0, c.x + 20.0, c.y + 15.0);
-                VehicleRecord {
-                    frame,
-                    score: 0.9,
-                    crop_box: b,
-                    det_box: b,
-                    prediction: None,
-                    vp1: Point2::new(f64::NAN, f64::NAN),
-                    vp2: Point2::new(f64::NAN, f64::NAN),
-                    edgelets: vec![],
-                }
+                VehicleRecord::of_box(frame, b)
             })
             .collect()
     }

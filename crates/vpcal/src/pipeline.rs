@@ -312,6 +312,23 @@ pub struct VehicleRecord {
     pub edgelets: Vec<Edgelet>,
 }
 
+#[cfg(test)]
+impl VehicleRecord {
+    /// A record of the box `b` alone (score 0.9, no network output, no edgelets), for tests.
+    pub(crate) fn of_box(frame: u64, b: BoxPx) -> VehicleRecord {
+        VehicleRecord {
+            frame,
+            score: 0.9,
+            crop_box: b,
+            det_box: b,
+            prediction: None,
+            vp1: Point2::new(0.0, 0.0),
+            vp2: Point2::new(0.0, 0.0),
+            edgelets: vec![],
+        }
+    }
+}
+
 impl VehicleRecord {
     pub fn to_vehicle(&self) -> VehicleVps {
         VehicleVps {

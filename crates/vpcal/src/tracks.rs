@@ -1062,16 +1062,7 @@ mod tests {
     }
 
     fn record(frame: u64, b: BoxPx) -> VehicleRecord {
-        VehicleRecord {
-            frame,
-            score: 0.9,
-            crop_box: b,
-            det_box: b,
-            prediction: None,
-            vp1: Point2::new(0.0, 0.0),
-            vp2: Point2::new(0.0, 0.0),
-            edgelets: vec![],
-        }
+        VehicleRecord::of_box(frame, b)
     }
 
     /// Track points of a vehicle driving along road x at `v` m/s, from frame `f0` to `f1`

@@ -181,17 +181,19 @@ fn predict(boxes: &[(f64, BoxPx)], track: &[usize], frame: f64) -> BoxPx {
 }
 
 /// The principal axes of a set of points (total least squares line).
-struct Axis {
-    mean: Point2,
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Axis {
+    pub mean: Point2,
     /// Unit direction of the major axis.
-    dir: Point2,
+    pub dir: Point2,
     /// RMS distance of the points from the mean along, and across, the major axis.
-    major_rms: f64,
-    minor_rms: f64,
+    pub major_rms: f64,
+    pub minor_rms: f64,
 }
 
 impl Axis {
-    fn of(points: &[Point2]) -> Axis {
+    /// The axes of `points` (all zero for none; `major_rms` is zero when they do not spread).
+    pub fn of(points: &[Point2]) -> Axis {
         let n = points.len().max(1) as f64;
         let mean = points.iter().fold(Point2::new(0.0, 0.0), |a, c| a + *c) / n;
         let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
