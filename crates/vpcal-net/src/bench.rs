@@ -87,7 +87,7 @@ impl Heatmaps for EncoderNet {
 }
 
 /// Benchmark `config` on `device` (a plain, non-autodiff device): the stacked hourglass, or
-/// the pretrained-encoder network for [`Encoder::YoloxNano`] (randomly initialised here; the
+/// the pretrained-encoder network for the other encoders (randomly initialised here; the
 /// time does not depend on the weights).
 ///
 /// # Errors
@@ -103,7 +103,9 @@ pub fn run(
         Encoder::Hourglass => {
             run_model(StackedHourglass::new(config, device), config, device, opts)
         }
-        Encoder::YoloxNano => run_model(EncoderNet::new(config, device), config, device, opts),
+        Encoder::YoloxNano | Encoder::MobilenetV2 | Encoder::EfficientnetLite0 => {
+            run_model(EncoderNet::new(config, device), config, device, opts)
+        }
     }
 }
 

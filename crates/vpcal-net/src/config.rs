@@ -7,6 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::mobile::MobileFamily;
 use crate::NetError;
 
 /// Order of the colour channels the network was trained on.
@@ -44,12 +45,38 @@ pub enum Encoder {
     /// The backbone of the COCO-pretrained YOLOX-nano detector with an FPN-lite decoder
     /// ([`EncoderNet`](crate::encoder::EncoderNet)).
     YoloxNano,
+    /// ImageNet-pretrained MobileNetV2 1.0 with the same decoder
+    /// ([`MobileNet`](crate::mobile::MobileNet)).
+    MobilenetV2,
+    /// ImageNet-pretrained EfficientNet-Lite0 with the same decoder
+    /// ([`MobileNet`](crate::mobile::MobileNet)).
+    EfficientnetLite0,
 }
 
 impl Encoder {
     /// Whether this is the default, [`Encoder::Hourglass`] (serde's `skip_serializing_if`).
     pub fn is_hourglass(&self) -> bool {
         *self == Encoder::Hourglass
+    }
+
+    /// The inverted-residual network of [`Encoder::MobilenetV2`] and
+    /// [`Encoder::EfficientnetLite0`].
+    pub fn mobile_family(self) -> Option<MobileFamily> {
+        match self {
+            Encoder::MobilenetV2 => Some(MobileFamily::MobilenetV2),
+            Encoder::EfficientnetLite0 => Some(MobileFamily::EfficientnetLite0),
+            Encoder::Hourglass | Encoder::YoloxNano => None,
+        }
+    }
+
+    /// Name in configs and presets (`yolox_nano`, `mobilenet_v2`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Encoder::Hourglass => "hourglass",
+            Encoder::YoloxNano => "yolox_nano",
+            Encoder::MobilenetV2 => "mobilenet_v2",
+            Encoder::EfficientnetLite0 => "efficientnet_lite0",
+        }
     }
 }
 
@@ -156,10 +183,27 @@ impl ModelConfig {
         }
     }
 
-    /// Names accepted by [`ModelConfig::preset`].
-    pub const PRESETS: [&'static str; 4] = ["paper", "small", "tiny", "yolox_nano"];
+    /// The pretrained-encoder network of [`ModelConfig::yolox_nano`] with another pretrained
+    /// backbone (`encoder` must not be [`Encoder::Hourglass`]).
+    pub fn pretrained(encoder: Encoder) -> Self {
+        ModelConfig {
+            encoder,
+            ..Self::yolox_nano()
+        }
+    }
 
-    /// A preset by name: `paper`, `small`, `tiny` or `yolox_nano`.
+    /// Names accepted by [`ModelConfig::preset`].
+    pub const PRESETS: [&'static str; 6] = [
+        "paper",
+        "small",
+        "tiny",
+        "yolox_nano",
+        "mobilenet_v2",
+        "efficientnet_lite0",
+    ];
+
+    /// A preset by name: `paper`, `small`, `tiny`, or a pretrained encoder (`yolox_nano`,
+    /// `mobilenet_v2`, `efficientnet_lite0`) with the decoder of [`ModelConfig::yolox_nano`].
     ///
     /// # Errors
     /// [`NetError::Config`] for any other name.
@@ -169,6 +213,8 @@ impl ModelConfig {
             "small" => Ok(Self::small()),
             "tiny" => Ok(Self::tiny()),
             "yolox_nano" => Ok(Self::yolox_nano()),
+            "mobilenet_v2" => Ok(Self::pretrained(Encoder::MobilenetV2)),
+            "efficientnet_lite0" => Ok(Self::pretrained(Encoder::EfficientnetLite0)),
             other => Err(NetError::Config(format!(
                 "unknown model preset {other:?} (expected one of {:?})",
                 Self::PRESETS
@@ -214,8 +260,8 @@ impl ModelConfig {
             ));
         }
         self.validate_common()?;
-        if self.encoder == Encoder::YoloxNano {
-            return self.validate_yolox();
+        if !self.encoder.is_hourglass() {
+            return self.validate_pretrained();
         }
         if self.stacks == 0 || self.depth == 0 {
             return bad(format!(
@@ -272,29 +318,32 @@ impl ModelConfig {
     }
 
     /// Checks of the pretrained-encoder network (see [`Encoder::YoloxNano`]).
-    fn validate_yolox(&self) -> Result<(), NetError> {
+    fn validate_pretrained(&self) -> Result<(), NetError> {
         let bad = |msg: String| Err(NetError::Config(msg));
+        let name = self.encoder.name();
         let stride = self.input_size / self.heatmap_size;
         if !(2..=32).contains(&stride) || !self.input_size.is_multiple_of(32) {
             return bad(format!(
-                "encoder yolox_nano: input_size {} must be a multiple of 32 and heatmap_size {} \
+                "encoder {name}: input_size {} must be a multiple of 32 and heatmap_size {} \
                  1/2 to 1/32 of it (a backbone stride: 2, 4, 8, 16 or 32)",
                 self.input_size, self.heatmap_size
             ));
         }
         if self.stacks != 1 {
             return bad(format!(
-                "encoder yolox_nano: stacks {} must be 1 (one heatmap output)",
+                "encoder {name}: stacks {} must be 1 (one heatmap output)",
                 self.stacks
             ));
         }
         if self.channels == 0 {
-            return bad("encoder yolox_nano: channels (decoder width) must be positive".into());
+            return bad(format!(
+                "encoder {name}: channels (decoder width) must be positive"
+            ));
         }
         if self.channel_order != ChannelOrder::Rgb || self.normalisation != Normalisation::Unit {
             return bad(format!(
-                "encoder yolox_nano: channel_order {:?} and normalisation {:?} must be rgb and \
-                 unit (the encoder converts to the detector's BGR 0-255 input itself)",
+                "encoder {name}: channel_order {:?} and normalisation {:?} must be rgb and \
+                 unit (the encoder converts crops to its own input convention itself)",
                 self.channel_order, self.normalisation
             ));
         }
@@ -367,6 +416,13 @@ mod tests {
         assert_eq!(serde_json::from_str::<ModelConfig>(&text).unwrap(), y);
         let d = ModelConfig::small().differences(&y);
         assert!(d.iter().any(|l| l.starts_with("encoder: ")), "{d:?}");
+        for name in ["mobilenet_v2", "efficientnet_lite0"] {
+            let c = ModelConfig::preset(name).unwrap();
+            assert_eq!(c.encoder.name(), name);
+            let text = serde_json::to_string(&c).unwrap();
+            assert!(text.contains(&format!(r#""encoder":"{name}""#)), "{text}");
+            assert_eq!(serde_json::from_str::<ModelConfig>(&text).unwrap(), c);
+        }
     }
 
     #[test]

@@ -24,7 +24,9 @@
 //! head: [conv3x3 W, BN, ReLU] x 2 -> out: conv1x1 -> 2 * scales heatmaps (VP1 at each scale, VP2)
 //! ```
 //! Weight names mirror the structure and YOLOX's own (`dark3.csp.m.1.conv2.dconv.weight`);
-//! inside [`EncoderNet`] they sit under `encoder.`. The pretrained weights are
+//! inside [`EncoderNet`] they sit under `encoder.`. [`EncoderNet`]'s backbone is a [`Backbone`]:
+//! this one, or an ImageNet-pretrained inverted-residual network of [`crate::mobile`] with the
+//! same decoder. The pretrained weights are
 //! `models/encoders/yolox_nano_backbone.safetensors` (written by
 //! `scripts/convert_yolox_backbone.py`, see its NOTICE), embedded in the crate.
 
@@ -38,7 +40,8 @@ use burn::tensor::module::{interpolate, max_pool2d};
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions, MaxPoolOptions};
 use burn::tensor::{Device, Tensor};
 
-use crate::config::ModelConfig;
+use crate::config::{Encoder, ModelConfig};
+use crate::mobile::MobileNet;
 use crate::model::apply;
 use crate::store::WeightsFile;
 use crate::NetError;
@@ -364,12 +367,62 @@ impl ConvBn {
     }
 }
 
-/// The pretrained-encoder VP network (see the module docs): YOLOX-nano backbone, FPN-lite
-/// decoder to the heatmap resolution, `2 * scales` heatmaps. Build it from a valid
-/// [`ModelConfig`] with [`Encoder::YoloxNano`](crate::config::Encoder::YoloxNano).
+/// The pretrained backbone in front of the decoder. Its weights are named as the backbone's own
+/// (the variant adds no name: `encoder.dark3.csp.conv1.weight`, `encoder.blocks.3.project.bias`).
+// One per network, so the variants' sizes do not matter (burn's derive does not take a Box).
+#[allow(clippy::large_enum_variant)]
+#[derive(Module, Debug)]
+pub enum Backbone {
+    /// [`YoloxNano`] (COCO).
+    YoloxNano(YoloxNano),
+    /// MobileNetV2 or EfficientNet-Lite0 (ImageNet).
+    Mobile(MobileNet),
+}
+
+impl Backbone {
+    /// A randomly initialised backbone of a pretrained-encoder config's kind.
+    pub fn new(encoder: Encoder, device: &Device) -> Self {
+        match encoder.mobile_family() {
+            Some(family) => Backbone::Mobile(MobileNet::new(family, device)),
+            None => Backbone::YoloxNano(YoloxNano::new(device)),
+        }
+    }
+
+    /// The backbone with its pretrained weights.
+    ///
+    /// # Errors
+    /// As [`YoloxNano::pretrained`] and [`MobileNet::pretrained`].
+    pub fn pretrained(encoder: Encoder, device: &Device) -> Result<Self, NetError> {
+        Ok(match encoder.mobile_family() {
+            Some(family) => Backbone::Mobile(MobileNet::pretrained(family, device)?),
+            None => Backbone::YoloxNano(YoloxNano::pretrained(device)?),
+        })
+    }
+
+    /// Channels of the maps at strides 2, 4, 8, 16 and 32.
+    pub fn channels(&self) -> [usize; 5] {
+        match self {
+            Backbone::YoloxNano(_) => YoloxNano::CHANNELS,
+            Backbone::Mobile(m) => m.family().channels(),
+        }
+    }
+
+    /// Features of crops, RGB in `[0, 1]`.
+    pub fn forward(&self, images: Tensor<4>) -> Features {
+        match self {
+            Backbone::YoloxNano(b) => b.forward(images),
+            Backbone::Mobile(b) => b.forward(images),
+        }
+    }
+}
+
+/// The pretrained-encoder VP network (see the module docs): a pretrained backbone (YOLOX-nano,
+/// MobileNetV2 or EfficientNet-Lite0), FPN-lite decoder to the heatmap resolution,
+/// `2 * scales` heatmaps. Build it from a valid [`ModelConfig`] whose
+/// [`Encoder`](crate::config::Encoder) is a pretrained one.
 #[derive(Module, Debug)]
 pub struct EncoderNet {
-    encoder: YoloxNano,
+    encoder: Backbone,
     /// 1x1 projections to the decoder width, coarse (dark5) to fine.
     lateral: Vec<Conv2d>,
     head: Vec<ConvBn>,
@@ -389,14 +442,16 @@ impl EncoderNet {
         let stride = config.input_size / config.heatmap_size.max(1);
         // Stages used: dark5 (stride 32) down to the one at the heatmap stride.
         let levels = (32 / stride.clamp(2, 32)).trailing_zeros() as usize + 1;
-        let lateral = YoloxNano::CHANNELS
+        let encoder = Backbone::new(config.encoder, device);
+        let lateral = encoder
+            .channels()
             .iter()
             .rev()
             .take(levels)
             .map(|&c| conv(c, w, 1, 1, 1, device))
             .collect();
         EncoderNet {
-            encoder: YoloxNano::new(device),
+            encoder,
             lateral,
             head: (0..Self::HEAD_LAYERS)
                 .map(|_| ConvBn::new(w, config, device))
@@ -406,12 +461,12 @@ impl EncoderNet {
         }
     }
 
-    /// A network whose encoder holds the detector's COCO weights (the decoder is random).
+    /// A network whose encoder holds its pretrained weights (the decoder is random).
     ///
     /// # Errors
-    /// As [`YoloxNano::pretrained`].
+    /// As [`Backbone::pretrained`].
     pub fn pretrained(config: &ModelConfig, device: &Device) -> Result<Self, NetError> {
-        Ok(Self::new(config, device).with_encoder(YoloxNano::pretrained(device)?))
+        Ok(Self::new(config, device).with_encoder(Backbone::pretrained(config.encoder, device)?))
     }
 
     /// Stop (`true`) or let (`false`) gradients reach the encoder: frozen, its parameters
@@ -427,8 +482,9 @@ impl EncoderNet {
         self
     }
 
-    /// The network with another encoder (e.g. [`YoloxNano::pretrained`]); keeps the frozen state.
-    pub fn with_encoder(mut self, encoder: YoloxNano) -> Self {
+    /// The network with another encoder (e.g. [`Backbone::pretrained`]) of the same kind;
+    /// keeps the frozen state.
+    pub fn with_encoder(mut self, encoder: Backbone) -> Self {
         self.encoder = encoder;
         let frozen = self.frozen;
         self.with_frozen_encoder(frozen)
@@ -440,7 +496,7 @@ impl EncoderNet {
     }
 
     /// The backbone.
-    pub fn encoder(&self) -> &YoloxNano {
+    pub fn encoder(&self) -> &Backbone {
         &self.encoder
     }
 
@@ -507,5 +563,60 @@ mod tests {
         let net = EncoderNet::new(&ModelConfig::yolox_nano(), &device);
         let x = Tensor::<4>::zeros([2, 3, 128, 128], &device);
         assert_eq!(net.forward_last(x).dims(), [2, 8, 32, 32]);
+        let names: Vec<String> = named_tensors(&net)
+            .unwrap()
+            .into_iter()
+            .map(|t| t.name)
+            .collect();
+        // The backbone enum's variant adds no name: the bundled model's names still load.
+        assert!(names
+            .iter()
+            .any(|n| n == "encoder.dark3.csp.m.2.conv2.dconv.bias"));
+    }
+
+    #[test]
+    fn mobile_encoder_networks_have_their_taps_and_names() {
+        let device = Device::flex();
+        for (encoder, backbone_params, expand_convs) in [
+            (Encoder::MobilenetV2, 1_795_936, 16),
+            (Encoder::EfficientnetLite0, 2_939_120, 15),
+        ] {
+            let config = ModelConfig::pretrained(encoder);
+            config.validate().unwrap();
+            let net = EncoderNet::new(&config, &device);
+            let Backbone::Mobile(m) = net.encoder() else {
+                panic!("{encoder:?} built another backbone");
+            };
+            assert_eq!(m.num_params(), backbone_params, "{encoder:?}");
+            let names: Vec<String> = named_tensors(&net)
+                .unwrap()
+                .into_iter()
+                .map(|t| t.name)
+                .collect();
+            let expands = names
+                .iter()
+                .filter(|n| n.starts_with("encoder.blocks.") && n.ends_with(".expand.weight"))
+                .count();
+            assert_eq!(expands, expand_convs, "{encoder:?}");
+            assert!(
+                names.iter().any(|n| n == "encoder.stem.weight"),
+                "{names:?}"
+            );
+            let x = Tensor::<4>::zeros([1, 3, 64, 64], &device);
+            let f = net.encoder().forward(x);
+            let dims: Vec<[usize; 4]> = f.coarse_to_fine().iter().map(|t| t.dims()).collect();
+            let c = encoder.mobile_family().unwrap().channels();
+            assert_eq!(
+                dims,
+                vec![
+                    [1, c[4], 2, 2],
+                    [1, c[3], 4, 4],
+                    [1, c[2], 8, 8],
+                    [1, c[1], 16, 16],
+                    [1, c[0], 32, 32]
+                ],
+                "{encoder:?}"
+            );
+        }
     }
 }

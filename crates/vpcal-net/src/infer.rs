@@ -40,7 +40,8 @@ pub struct CropPrediction {
 pub enum VpModel {
     /// The stacked hourglass ([`Encoder::Hourglass`]).
     Hourglass(Box<StackedHourglass>),
-    /// The pretrained-encoder network ([`Encoder::YoloxNano`]).
+    /// The pretrained-encoder network ([`Encoder::YoloxNano`] and the other pretrained
+    /// encoders).
     Encoder(Box<EncoderNet>),
 }
 
@@ -199,7 +200,9 @@ impl VpNet {
     ) -> Result<VpNet, NetError> {
         let expected = match config.encoder {
             Encoder::Hourglass => StackedHourglass::KIND,
-            Encoder::YoloxNano => EncoderNet::KIND,
+            Encoder::YoloxNano | Encoder::MobilenetV2 | Encoder::EfficientnetLite0 => {
+                EncoderNet::KIND
+            }
         };
         if let Some(kind) = &file.kind {
             if kind != expected {
@@ -218,7 +221,9 @@ impl VpNet {
             Encoder::Hourglass => {
                 VpModel::from(file.load_into(StackedHourglass::new(&config, &device))?)
             }
-            Encoder::YoloxNano => VpModel::from(file.load_into(EncoderNet::new(&config, &device))?),
+            Encoder::YoloxNano | Encoder::MobilenetV2 | Encoder::EfficientnetLite0 => {
+                VpModel::from(file.load_into(EncoderNet::new(&config, &device))?)
+            }
         };
         Ok(Self::new(model, config, &device))
     }

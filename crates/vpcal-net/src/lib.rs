@@ -5,8 +5,9 @@
 //! Entry points:
 //! - [`ModelConfig`] (presets [`ModelConfig::paper`], [`ModelConfig::small`],
 //!   [`ModelConfig::tiny`]) and [`StackedHourglass`], the network of DESIGN.md §5;
-//!   [`EncoderNet`] ([`ModelConfig::yolox_nano`]) puts the COCO-pretrained YOLOX-nano backbone
-//!   ([`encoder`]) in front of the same heatmap outputs;
+//!   [`EncoderNet`] ([`ModelConfig::yolox_nano`], [`ModelConfig::pretrained`]) puts a
+//!   pretrained backbone in front of the same heatmap outputs: YOLOX-nano's (COCO,
+//!   [`encoder`]), MobileNetV2's or EfficientNet-Lite0's (ImageNet, [`mobile`]);
 //!   [`regression`] holds the paper's regression baselines (ResNet-50, hourglass + pooling,
 //!   normalised L1/L2 losses).
 //! - [`Trainer`] with [`TrainConfig`] and [`LrSchedule`]: Adam, the paper's two-phase schedule,
@@ -36,6 +37,7 @@ pub mod encoder;
 mod fsutil;
 pub mod infer;
 pub mod metrics;
+pub mod mobile;
 pub mod model;
 pub mod network;
 pub mod pipeline_source;

@@ -11,7 +11,7 @@ use vpcal_geom::heatmap::{DecodeMode, HeatmapCodec};
 use vpcal_geom::Point2;
 
 use crate::config::{Encoder, ModelConfig};
-use crate::encoder::{EncoderNet, YoloxNano};
+use crate::encoder::{Backbone, EncoderNet};
 use crate::metrics::VpErrorAccumulator;
 use crate::model::StackedHourglass;
 use crate::NetError;
@@ -322,7 +322,13 @@ impl VpNetwork for EncoderNet {
     const KIND: &'static str = "yolox_nano_fpn";
 
     fn validate_config(config: &ModelConfig) -> Result<(), NetError> {
-        require_encoder(config, Encoder::YoloxNano, Self::KIND)?;
+        if config.encoder.is_hourglass() {
+            return Err(NetError::Config(format!(
+                "encoder {:?} is not built by a {:?} network (expected a pretrained encoder)",
+                config.encoder,
+                Self::KIND
+            )));
+        }
         config.validate()
     }
 
@@ -331,10 +337,11 @@ impl VpNetwork for EncoderNet {
         EncoderNet::new(config, device)
     }
 
-    fn load_pretrained(self, _config: &ModelConfig) -> Result<Self, NetError> {
+    fn load_pretrained(self, config: &ModelConfig) -> Result<Self, NetError> {
         let device = self.devices().first().cloned().unwrap_or_else(Device::flex);
         // Loaded on the plain device: moved to an autodiff device, its tensors become leaves.
-        let encoder = YoloxNano::pretrained(&device.clone().without_autodiff())?.to_device(&device);
+        let encoder = Backbone::pretrained(config.encoder, &device.clone().without_autodiff())?
+            .to_device(&device);
         Ok(self.with_encoder(encoder))
     }
 

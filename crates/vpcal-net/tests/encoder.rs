@@ -1,9 +1,11 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! The pretrained YOLOX-nano encoder against onnxruntime's feature maps of the original
-//! detector, and the encoder network's training, freezing, checkpoints and inference.
+//! detector, MobileNetV2 and EfficientNet-Lite0 against a numpy forward of their source
+//! weights, and the encoder network's training, freezing, checkpoints and inference.
 
 use burn::tensor::{Device, Tensor, TensorData};
-use vpcal_net::encoder::{Features, YoloxNano};
+use vpcal_net::encoder::{Backbone, Features, YoloxNano};
+use vpcal_net::mobile::{MobileFamily, MobileNet};
 use vpcal_net::network::to_vec;
 use vpcal_net::store::named_tensors;
 use vpcal_net::train::LrSchedule;
@@ -27,6 +29,59 @@ fn golden_input() -> Vec<f32> {
     v
 }
 
+const MOBILE_GOLDEN: &str = include_str!("data/mobile_encoders_golden.json");
+
+/// Largest error of a feature map against a golden entry (shape, mean, std, 16 samples),
+/// relative to the map's standard deviation (values near zero have no relative precision).
+fn golden_error(t: Tensor<4>, g: &serde_json::Value, what: &str) -> f64 {
+    let shape: Vec<usize> = serde_json::from_value(g["shape"].clone()).unwrap();
+    assert_eq!(t.dims().to_vec(), shape, "{what}");
+    let v: Vec<f64> = to_vec(t).unwrap().into_iter().map(f64::from).collect();
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let std = (v.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / n).sqrt();
+    let (gm, gs) = (g["mean"].as_f64().unwrap(), g["std"].as_f64().unwrap());
+    let scale = gs.max(1e-6);
+    let mut errs = vec![(mean - gm).abs() / scale, (std - gs).abs() / scale];
+    for pair in g["samples"].as_array().unwrap() {
+        let i = pair[0].as_u64().unwrap() as usize;
+        let want = pair[1].as_f64().unwrap();
+        errs.push((v[i] - want).abs() / scale);
+    }
+    errs.iter().cloned().fold(0.0, f64::max)
+}
+
+/// The golden input of `scripts/convert_mobile_encoders.py`: 1x3x128x128, RGB in [0, 1].
+fn mobile_golden_input() -> Vec<f32> {
+    golden_input()
+        .into_iter()
+        .map(|v| ((f64::from(v) - 127.5) / 255.0 + 0.5) as f32)
+        .collect()
+}
+
+#[test]
+fn mobile_encoders_match_the_numpy_forward_of_their_source_weights() {
+    let device = Device::flex();
+    let golden: serde_json::Value = serde_json::from_str(MOBILE_GOLDEN).unwrap();
+    let x = Tensor::<4>::from_data(
+        TensorData::new(mobile_golden_input(), [1, 3, 128, 128]),
+        &device,
+    );
+    for family in [MobileFamily::MobilenetV2, MobileFamily::EfficientnetLite0] {
+        let net = MobileNet::pretrained(family, &device).unwrap();
+        let features = net.forward(x.clone()).coarse_to_fine();
+        for (t, stride) in features.into_iter().zip([32, 16, 8, 4, 2]) {
+            let level = (stride as u32).trailing_zeros() as usize - 1;
+            assert_eq!(t.dims()[1], family.channels()[level]);
+            let g = &golden["encoders"][family.name()]["features"][format!("s{stride}")];
+            let what = format!("{} stride {stride}", family.name());
+            let max = golden_error(t, g, &what);
+            eprintln!("{what}: max error {max:.2e} of the map's std");
+            assert!(max < 1e-4, "{what}: error {max:.3e} x std vs numpy");
+        }
+    }
+}
+
 fn by_stage(f: Features) -> Vec<(&'static str, Tensor<4>)> {
     vec![
         ("stem", f.stem),
@@ -45,24 +100,8 @@ fn pretrained_backbone_matches_onnxruntime() {
     let x = Tensor::<4>::from_data(TensorData::new(golden_input(), [1, 3, 128, 128]), &device);
     let mut worst = 0.0f64;
     for (stage, t) in by_stage(backbone.forward_bgr255(x.clone())) {
-        let g = &golden["features"][stage];
-        let shape: Vec<usize> = serde_json::from_value(g["shape"].clone()).unwrap();
-        assert_eq!(t.dims().to_vec(), shape, "{stage}");
-        let v: Vec<f64> = to_vec(t).unwrap().into_iter().map(f64::from).collect();
-        let n = v.len() as f64;
-        let mean = v.iter().sum::<f64>() / n;
-        let std = (v.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / n).sqrt();
-        let (gm, gs) = (g["mean"].as_f64().unwrap(), g["std"].as_f64().unwrap());
-        // Errors relative to the map's spread (values near zero have no relative precision).
-        let scale = gs.max(1e-6);
-        let mut errs = vec![(mean - gm).abs() / scale, (std - gs).abs() / scale];
-        for pair in g["samples"].as_array().unwrap() {
-            let i = pair[0].as_u64().unwrap() as usize;
-            let want = pair[1].as_f64().unwrap();
-            errs.push((v[i] - want).abs() / scale);
-        }
-        let max = errs.iter().cloned().fold(0.0, f64::max);
-        eprintln!("{stage}: max error {max:.2e} of the map's std {gs:.3}");
+        let max = golden_error(t, &golden["features"][stage], stage);
+        eprintln!("{stage}: max error {max:.2e} of the map's std");
         assert!(max < 1e-4, "{stage}: error {max:.3e} x std vs onnxruntime");
         worst = worst.max(max);
     }
@@ -114,7 +153,7 @@ fn frozen_encoder_network_learns_checkpoints_and_loads_for_inference() {
         .with_progress(false);
     let pretrained = encoder_bits(
         &YoloxNano::pretrained(&device)
-            .map(|b| EncoderNet::new(&config, &device).with_encoder(b))
+            .map(|b| EncoderNet::new(&config, &device).with_encoder(Backbone::YoloxNano(b)))
             .unwrap(),
     );
     assert_eq!(

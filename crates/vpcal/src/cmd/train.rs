@@ -12,8 +12,8 @@ use vpcal_geom::heatmap::HeatmapCodec;
 use vpcal_net::regression::{NormLoss, RegressionConfig, Regressor};
 use vpcal_net::train::EpochRecord;
 use vpcal_net::{
-    BatchSource, Encoder, EncoderNet, LrSchedule, ModelConfig, PipelineSource, StackedHourglass,
-    ToySource, TrainConfig, Trainer, VpNetwork,
+    BatchSource, EncoderNet, LrSchedule, ModelConfig, PipelineSource, StackedHourglass, ToySource,
+    TrainConfig, Trainer, VpNetwork,
 };
 
 /// The augmentation of a new run without `--augment`: the paper's.
@@ -63,12 +63,15 @@ pub struct Args {
     #[arg(long)]
     pub resume: bool,
     /// Model size: `paper` (the paper's stacked hourglass: 2 stacks, 128 px crops, 64 px
-    /// heatmaps, 4 scales; a GPU is advised), `small` (the bundled model's size), `tiny`
-    /// (CPU training and tests) or `yolox_nano` (the COCO-pretrained YOLOX-nano backbone with
-    /// an FPN-lite decoder: 128 px crops, 32 px heatmaps; see --freeze-encoder).
+    /// heatmaps, 4 scales; a GPU is advised), `small`, `tiny` (CPU training and tests), or a
+    /// pretrained encoder with an FPN-lite decoder (128 px crops, 32 px heatmaps; see
+    /// --freeze-encoder): `yolox_nano` (the COCO-pretrained YOLOX-nano backbone, the bundled
+    /// model's), `mobilenet_v2` or `efficientnet_lite0` (ImageNet; their weights are read from
+    /// the repository's models/encoders, or from the folder named by $VPCAL_ENCODERS).
     #[arg(long, default_value = "paper")]
     pub preset: String,
-    /// Keep the pretrained encoder of `--preset yolox_nano` fixed and train only its decoder
+    /// Keep the pretrained encoder (`--preset yolox_nano`, `mobilenet_v2`, `efficientnet_lite0`)
+    /// fixed and train only its decoder
     /// (the first phase, e.g. --lr 1e-3). Fine-tune the whole network afterwards in a new run
     /// with `--init RUN/checkpoints/epoch-N/model.safetensors` without this flag and a low rate
     /// (--lr 1e-4 or less), so the pretrained features are not destroyed. A resumed run keeps
@@ -458,7 +461,7 @@ pub fn run(a: Args) -> Result<()> {
             let encoder = if a.resume {
                 resumed_run_is_encoder(&a.out)?
             } else {
-                model.encoder == Encoder::YoloxNano
+                !model.encoder.is_hourglass()
             };
             if encoder {
                 run_arch::<EncoderNet>(&a, model)
