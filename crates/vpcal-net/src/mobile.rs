@@ -269,10 +269,22 @@ impl MobileNet {
     /// The network with its ImageNet weights, read from [`MobileFamily::weights_path`].
     ///
     /// # Errors
-    /// [`NetError::Io`] naming the file when it cannot be read; [`NetError::Weights`] when it
+    /// [`NetError::Weights`] naming the file when it cannot be read (with where to find it) or
     /// does not match the module.
     pub fn pretrained(family: MobileFamily, device: &Device) -> Result<Self, NetError> {
-        WeightsFile::read(&family.weights_path())?.load_into(Self::new(family, device))
+        let path = family.weights_path();
+        let file = WeightsFile::read(&path).map_err(|e| match e {
+            NetError::Io { source, .. } => NetError::Weights {
+                path: path.clone(),
+                message: format!(
+                    "cannot read the pretrained {} encoder ({source}); it is in a vpcal \
+                     checkout's models/encoders, or set ${ENCODERS_ENV} to the folder holding it",
+                    family.name()
+                ),
+            },
+            other => other,
+        })?;
+        file.load_into(Self::new(family, device))
     }
 
     /// Which network this is.
