@@ -39,8 +39,9 @@ use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::PaddingConfig2d;
 use burn::tensor::{Device, Tensor};
 
+use crate::config::{ChannelOrder, Normalisation};
 use crate::encoder::Features;
-use crate::model::apply;
+use crate::model::{apply, InputSpec};
 use crate::store::WeightsFile;
 use crate::NetError;
 
@@ -138,21 +139,22 @@ impl MobileFamily {
         self == MobileFamily::EfficientnetLite0
     }
 
-    /// `[b, 3, h, w]` RGB in `[0, 1]` -> the input the network was trained on.
-    fn normalise(self, x: Tensor<4>) -> Tensor<4> {
-        match self {
-            MobileFamily::MobilenetV2 => {
-                let device = x.device();
-                let mean =
-                    Tensor::<1>::from_floats([0.485, 0.456, 0.406], &device).reshape([1, 3, 1, 1]);
-                let inv =
-                    Tensor::<1>::from_floats([1.0 / 0.229, 1.0 / 0.224, 1.0 / 0.225], &device)
-                        .reshape([1, 3, 1, 1]);
-                (x - mean) * inv
-            }
-            MobileFamily::EfficientnetLite0 => {
-                x.mul_scalar(255.0 / 128.0).sub_scalar(127.0 / 128.0)
-            }
+    /// What turns RGB `[0, 1]` crops into the input the network was trained on: ImageNet's
+    /// mean/std, or TF-Lite's `(255 x - 127) / 128` = `(x - 127/255) / (128/255)`.
+    fn input(self) -> InputSpec {
+        let normalisation = match self {
+            MobileFamily::MobilenetV2 => Normalisation::MeanStd {
+                mean: [0.485, 0.456, 0.406],
+                std: [0.229, 0.224, 0.225],
+            },
+            MobileFamily::EfficientnetLite0 => Normalisation::MeanStd {
+                mean: [127.0 / 255.0; 3],
+                std: [128.0 / 255.0; 3],
+            },
+        };
+        InputSpec {
+            channel_order: ChannelOrder::Rgb,
+            normalisation,
         }
     }
 
@@ -298,7 +300,8 @@ impl MobileNet {
     /// - `images`: `[batch, 3, S, S]`, RGB in `[0, 1]`, S a multiple of 32
     /// - output: [`Features`] with the channels of [`MobileFamily::channels`]
     pub fn forward(&self, images: Tensor<4>) -> Features {
-        let mut x = relu6(apply(&self.stem, self.family.normalise(images))); // [b, 32, S/2, S/2]
+        let x = self.family.input().apply(images);
+        let mut x = relu6(apply(&self.stem, x)); // [b, 32, S/2, S/2]
         let mut taps: Vec<Tensor<4>> = Vec::with_capacity(5);
         for (i, block) in self.blocks.iter().enumerate() {
             x = block.forward(x);

@@ -38,32 +38,44 @@ pub struct NamedTensor {
     pub values: Vec<f32>,
 }
 
-/// Whether a module container is an enum's variant: a variant adds no name to the paths (an
+/// The path of the module a visitor or mapper is in. An enum's variant adds no name to it (an
 /// enum of backbones stores each as the backbone itself).
-fn is_enum(container_type: &str) -> bool {
-    container_type.starts_with("Enum:")
+#[derive(Default)]
+struct ModulePath(Vec<String>);
+
+impl ModulePath {
+    fn enter(&mut self, name: &str, container_type: &str) {
+        if !container_type.starts_with("Enum:") {
+            self.0.push(name.to_string());
+        }
+    }
+    fn exit(&mut self, container_type: &str) {
+        if !container_type.starts_with("Enum:") {
+            self.0.pop();
+        }
+    }
+    /// The dotted tensor name (`stacks.0.head_bn.running_mean`).
+    fn name(&self) -> String {
+        self.0.join(".")
+    }
 }
 
 #[derive(Default)]
 struct Collector {
-    path: Vec<String>,
+    path: ModulePath,
     out: Vec<NamedTensor>,
     error: Option<String>,
 }
 
 impl ModuleVisitor for Collector {
     fn enter_module(&mut self, name: &str, container_type: &str) {
-        if !is_enum(container_type) {
-            self.path.push(name.to_string());
-        }
+        self.path.enter(name, container_type);
     }
     fn exit_module(&mut self, _name: &str, container_type: &str) {
-        if !is_enum(container_type) {
-            self.path.pop();
-        }
+        self.path.exit(container_type);
     }
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let name = self.path.join(".");
+        let name = self.path.name();
         let data = param.val().into_data();
         let shape = data.shape().to_vec();
         match data.convert::<f32>().try_to_vec::<f32>() {
@@ -264,7 +276,7 @@ impl WeightsFile {
     pub fn load_into<M: Module>(&self, module: M) -> Result<M, NetError> {
         let mut mapper = Loader {
             file: self,
-            path: Vec::new(),
+            path: ModulePath::default(),
             used: Vec::new(),
             problems: Vec::new(),
         };
@@ -297,24 +309,20 @@ impl WeightsFile {
 
 struct Loader<'a> {
     file: &'a WeightsFile,
-    path: Vec<String>,
+    path: ModulePath,
     used: Vec<String>,
     problems: Vec<String>,
 }
 
 impl ModuleMapper for Loader<'_> {
     fn enter_module(&mut self, name: &str, container_type: &str) {
-        if !is_enum(container_type) {
-            self.path.push(name.to_string());
-        }
+        self.path.enter(name, container_type);
     }
     fn exit_module(&mut self, _name: &str, container_type: &str) {
-        if !is_enum(container_type) {
-            self.path.pop();
-        }
+        self.path.exit(container_type);
     }
     fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-        let name = self.path.join(".");
+        let name = self.path.name();
         let expected = param.lazy_shape().to_vec();
         let Some((shape, values)) = self.file.tensors.get(&name) else {
             self.problems.push(format!(
