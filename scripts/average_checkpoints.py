@@ -15,47 +15,12 @@ that does not depend on where the run was stopped.
 """
 import argparse
 import json
-import struct
 import sys
 from pathlib import Path
 
 import numpy as np
 
-
-def read(path):
-    data = path.read_bytes()
-    n = struct.unpack("<Q", data[:8])[0]
-    header = json.loads(data[8:8 + n])
-    meta = header.pop("__metadata__", {})
-    base = 8 + n
-    tensors = {}
-    for name, h in header.items():
-        if h["dtype"] != "F32":
-            sys.exit(f"{path}: tensor {name} has dtype {h['dtype']}, expected F32")
-        a, b = h["data_offsets"]
-        tensors[name] = np.frombuffer(data[base + a:base + b], dtype="<f4").reshape(h["shape"])
-    return tensors, meta
-
-
-def write(path, tensors, meta):
-    header = {"__metadata__": meta}
-    offset = 0
-    blobs = []
-    for name in sorted(tensors):
-        b = np.ascontiguousarray(tensors[name], dtype="<f4").tobytes()
-        header[name] = {"dtype": "F32", "shape": list(tensors[name].shape),
-                        "data_offsets": [offset, offset + len(b)]}
-        offset += len(b)
-        blobs.append(b)
-    h = json.dumps(header, separators=(",", ":")).encode()
-    h += b" " * ((8 - len(h) % 8) % 8)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        f.write(struct.pack("<Q", len(h)))
-        f.write(h)
-        for b in blobs:
-            f.write(b)
-    tmp.replace(path)
+import safetensors_np
 
 
 def main():
@@ -64,10 +29,10 @@ def main():
     ap.add_argument("checkpoints", type=Path, nargs="+")
     a = ap.parse_args()
     paths = [p / "model.safetensors" if p.is_dir() else p for p in a.checkpoints]
-    first, meta = read(paths[0])
+    first, meta = safetensors_np.read(paths[0])
     acc = {k: v.astype(np.float64) for k, v in first.items()}
     for p in paths[1:]:
-        t, _ = read(p)
+        t, _ = safetensors_np.read(p)
         if set(t) != set(acc):
             sys.exit(f"{p}: tensors differ from {paths[0]}: "
                      f"{sorted(set(t) ^ set(acc))[:5]}")
@@ -78,7 +43,7 @@ def main():
     out = {k: (v / len(paths)).astype(np.float32) for k, v in acc.items()}
     meta = dict(meta)
     meta["vpcal.averaged_from"] = json.dumps([str(p) for p in paths])
-    write(a.out, out, meta)
+    safetensors_np.write(a.out, out, meta)
     print(f"{a.out}: mean of {len(paths)} checkpoints, {len(out)} tensors")
 
 

@@ -39,7 +39,6 @@ import argparse
 import glob
 import hashlib
 import json
-import struct
 import subprocess
 import sys
 import tempfile
@@ -51,6 +50,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent / "encoders"))
 import legacy_pt  # noqa: E402
 import mobile_numpy as mn  # noqa: E402
+import safetensors_np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = ROOT / "crates/vpcal-net/tests/data/mobile_encoders_golden.json"
@@ -148,27 +148,6 @@ def efficientnet_lite0_tensors(d, eps):
     return t
 
 
-def write_safetensors(path, tensors, metadata):
-    header = {"__metadata__": metadata}
-    offset = 0
-    blobs = []
-    for name in sorted(tensors):
-        a = np.ascontiguousarray(tensors[name], dtype="<f4")
-        b = a.tobytes()
-        header[name] = {"dtype": "F32", "shape": list(a.shape), "data_offsets": [offset, offset + len(b)]}
-        offset += len(b)
-        blobs.append(b)
-    h = json.dumps(header, separators=(",", ":")).encode()
-    h += b" " * ((8 - len(h) % 8) % 8)
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "wb") as f:
-        f.write(struct.pack("<Q", len(h)))
-        f.write(h)
-        for b in blobs:
-            f.write(b)
-    tmp.replace(path)
-
-
 def golden_input():
     c, h, w = np.meshgrid(np.arange(3), np.arange(SIZE), np.arange(SIZE), indexing="ij")
     return 0.5 + 0.5 * np.sin(0.07 * (c + 1) * h + 0.05 * (3 - c) * w + 0.3 * c)
@@ -227,7 +206,7 @@ def main():
             "extracted": "stem and inverted-residual blocks to the last 320-channel block, BN folded",
             "script": "scripts/convert_mobile_encoders.py",
         }
-        write_safetensors(out, tensors, meta)
+        safetensors_np.write(out, tensors, meta)
         params = sum(t.size for t in tensors.values())
         print(f"{out.relative_to(ROOT)}: {len(tensors)} tensors, {params} parameters, "
               f"sha256 {hashlib.sha256(out.read_bytes()).hexdigest()}; source sha256 {meta['source_sha256']}")

@@ -24,7 +24,6 @@ the backbone.
 """
 import hashlib
 import json
-import struct
 import sys
 from pathlib import Path
 
@@ -32,6 +31,8 @@ import numpy as np
 import onnx
 import onnxruntime as ort
 from onnx import numpy_helper
+
+import safetensors_np
 
 ROOT = Path(__file__).resolve().parent.parent
 SRC = ROOT / "models/yolox_nano_coco/yolox_nano.onnx"
@@ -70,26 +71,6 @@ def backbone_conv_names():
     return names
 
 
-def write_safetensors(path, tensors, metadata):
-    header = {"__metadata__": metadata}
-    offset = 0
-    blobs = []
-    for name in sorted(tensors):
-        a = np.ascontiguousarray(tensors[name], dtype="<f4")
-        b = a.tobytes()
-        header[name] = {"dtype": "F32", "shape": list(a.shape), "data_offsets": [offset, offset + len(b)]}
-        offset += len(b)
-        blobs.append(b)
-    h = json.dumps(header, separators=(",", ":")).encode()
-    h += b" " * ((8 - len(h) % 8) % 8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as f:
-        f.write(struct.pack("<Q", len(h)))
-        f.write(h)
-        for b in blobs:
-            f.write(b)
-
-
 def golden_input():
     c, h, w = np.meshgrid(np.arange(3), np.arange(SIZE), np.arange(SIZE), indexing="ij")
     x = 127.5 + 127.5 * np.sin(0.07 * (c + 1) * h + 0.05 * (3 - c) * w + 0.3 * c)
@@ -120,7 +101,7 @@ def main():
         "script": "scripts/convert_yolox_backbone.py",
         "license": "Apache-2.0 (models/encoders/LICENSE)",
     }
-    write_safetensors(OUT, tensors, meta)
+    safetensors_np.write(OUT, tensors, meta)
     print(f"{OUT.relative_to(ROOT)}: {len(tensors)} tensors, {params} parameters, "
           f"sha256 {hashlib.sha256(OUT.read_bytes()).hexdigest()}")
 
