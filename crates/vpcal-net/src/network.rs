@@ -260,11 +260,17 @@ fn heatmap_evaluate(
     Ok(terms)
 }
 
-/// The config's encoder must be `want` for the network `kind`.
-fn require_encoder(config: &ModelConfig, want: Encoder, kind: &str) -> Result<(), NetError> {
-    if config.encoder != want {
+/// The config's encoder must be the hourglass (`pretrained` false) or a pretrained one (true)
+/// for the network `kind`.
+fn require_encoder(config: &ModelConfig, pretrained: bool, kind: &str) -> Result<(), NetError> {
+    if config.encoder.is_hourglass() == pretrained {
+        let want = if pretrained {
+            "a pretrained encoder".to_string()
+        } else {
+            format!("{:?}", Encoder::Hourglass)
+        };
         return Err(NetError::Config(format!(
-            "encoder {:?} is not built by a {kind:?} network (expected {want:?})",
+            "encoder {:?} is not built by a {kind:?} network (expected {want})",
             config.encoder
         )));
     }
@@ -276,7 +282,7 @@ impl VpNetwork for StackedHourglass {
     const KIND: &'static str = "stacked_hourglass";
 
     fn validate_config(config: &ModelConfig) -> Result<(), NetError> {
-        require_encoder(config, Encoder::Hourglass, Self::KIND)?;
+        require_encoder(config, false, Self::KIND)?;
         config.validate()
     }
 
@@ -322,13 +328,7 @@ impl VpNetwork for EncoderNet {
     const KIND: &'static str = "yolox_nano_fpn";
 
     fn validate_config(config: &ModelConfig) -> Result<(), NetError> {
-        if config.encoder.is_hourglass() {
-            return Err(NetError::Config(format!(
-                "encoder {:?} is not built by a {:?} network (expected a pretrained encoder)",
-                config.encoder,
-                Self::KIND
-            )));
-        }
+        require_encoder(config, true, Self::KIND)?;
         config.validate()
     }
 
