@@ -135,12 +135,12 @@ fn train_resume_and_predict_on_toy_data() {
 }
 
 /// Real KITTI vehicles with exact VPs: the per-vehicle measurements run end to end, and the
-/// edgelet VP2 keeps what it was measured at (`vpcal eval kitti --data
-/// $VPCAL_DATA/real/kitti_object --json` with the bundled model of models/default: 25 clean
-/// vehicles, 17 with enough edgelets, median 2.37°, 90th percentile 6.35°; the network's VP1
-/// 9.90° / 42.9°, VP2 3.02° / 7.25°). The edgelets are gated by the network's VP2 ray, so
-/// these move with the bundled model (models/hourglass_small, bundled before it: 18 vehicles,
-/// 2.24° / 6.19°).
+/// bundled network and the edgelet VP2 keep what they were measured at (`vpcal eval kitti
+/// --data $VPCAL_DATA/real/kitti_object --json` with the bundled model of models/default: 25
+/// clean vehicles; the network's VP1 median 2.57° (90th percentile 22.3°), VP2 2.48° (4.59°);
+/// 18 with enough edgelets, median 2.44°, 90th percentile 4.40°). The edgelets are gated by
+/// the network's VP2 ray, so they move with the bundled model (models/yolox_nano_fpn, bundled
+/// before it: VP1 9.90°, VP2 3.02°, 17 edgelet vehicles at 2.37° / 6.35°).
 #[test]
 fn kitti_per_vehicle_direction_errors() {
     let Some(dir) = real_data("real/kitti_object") else {
@@ -151,12 +151,16 @@ fn kitti_per_vehicle_direction_errors() {
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     let clean = &v["clean"];
     assert_eq!(clean["vehicles"], 25);
+    let median = |key: &str| clean[key]["median_deg"].as_f64().unwrap();
+    assert!(median("network_vp1") < 3.0, "{clean}");
+    assert!(median("network_vp2") < 2.7, "{clean}");
     let edge = &clean["edgelet_vp2"];
-    assert_eq!(edge["n"], 17);
+    assert_eq!(edge["n"], 18);
     assert!(edge["median_deg"].as_f64().unwrap() < 2.5, "{edge}");
-    assert!(edge["p90_deg"].as_f64().unwrap() < 6.5, "{edge}");
-    // The constant guess is measured too, and beats today's network on VP1 (issue 18).
-    assert!(clean["pp_vp1"]["median_deg"].as_f64().unwrap() < 3.0);
+    assert!(edge["p90_deg"].as_f64().unwrap() < 5.0, "{edge}");
+    // The constant guess (VP1 at the principal point) is measured too: KITTI's cars mostly
+    // drive ahead of the recording car, so it scores 2.02° (issue 18).
+    assert!(median("pp_vp1") < 3.0);
     // Bad input names the file.
     let o = vpcal(&["eval", "kitti", "--data", "/nonexistent"]);
     assert!(!o.status.success());
