@@ -30,6 +30,12 @@ pub trait VpNetwork: Module + Clone + core::fmt::Debug + 'static {
     /// [`NetError::Config`] naming the offending field.
     fn validate_config(config: &Self::Config) -> Result<(), NetError>;
 
+    /// How messages name a network of this config: [`VpNetwork::KIND`] unless the kind has
+    /// variants a reader would want to tell apart.
+    fn describe(_config: &Self::Config) -> String {
+        Self::KIND.to_string()
+    }
+
     /// A freshly initialised network.
     fn init(config: &Self::Config, device: &Device) -> Self;
 
@@ -332,7 +338,13 @@ impl VpNetwork for EncoderNet {
         config.validate()
     }
 
-    /// A random network; [`VpNetwork::load_pretrained`] loads the COCO encoder weights.
+    /// The kind with its encoder: checkpoints of every pretrained encoder share the kind.
+    fn describe(config: &ModelConfig) -> String {
+        format!("{} with the {} encoder", Self::KIND, config.encoder.name())
+    }
+
+    /// A random network; [`VpNetwork::load_pretrained`] loads the encoder's pretrained
+    /// weights (COCO or ImageNet).
     fn init(config: &ModelConfig, device: &Device) -> Self {
         EncoderNet::new(config, device)
     }

@@ -416,7 +416,7 @@ fn run_arch<N: VpNetwork>(a: &Args, model: N::Config) -> Result<()> {
     eprintln!("data: {}", source.describe());
     eprintln!(
         "model: {} ({} parameters), {} epochs, batch {}, run folder {}",
-        N::KIND,
+        N::describe(&trainer.config().model),
         trainer.model().param_count(),
         trainer.config().schedule.total_epochs(),
         trainer.config().batch_size,
