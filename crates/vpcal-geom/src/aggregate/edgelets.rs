@@ -26,7 +26,7 @@
 use super::line_angle_diff;
 use super::tracks::Tangent;
 use crate::point::Point2;
-use crate::solve::{nelder_mead, par_map, percentile, SplitMix};
+use crate::solve::{nelder_mead, par_map, percentile, percentile_sorted, SplitMix};
 
 /// Focal lengths the straight edgelet fit's grid spans, in image widths: 0.25 (a 127° view) to
 /// 20 (a 3° view), beyond the physical range of traffic cameras on both sides, so that the
@@ -286,12 +286,19 @@ pub const MAX_FOCAL_BIAS_LOG_SPREAD: f64 = 0.35;
 /// deviation, measured as the focal length's is. NaN where there were no resamples. (A standard
 /// deviation would let the few resamples whose refit settles in another valley, such as the
 /// edges of a crossing road's traffic, decide alone whether the roll is usable.)
-fn bootstrap_spread(fs: Vec<f64>, rolls: &[f64]) -> (f64, f64, f64) {
+fn bootstrap_spread(mut fs: Vec<f64>, rolls: &[f64]) -> (f64, f64, f64) {
     if fs.is_empty() || rolls.is_empty() {
         return (f64::NAN, f64::NAN, f64::NAN);
     }
-    let roll_sd = 0.5 * (percentile(rolls.to_vec(), 84.0) - percentile(rolls.to_vec(), 16.0));
-    (percentile(fs.clone(), 16.0), percentile(fs, 84.0), roll_sd)
+    let mut rolls = rolls.to_vec();
+    fs.sort_by(f64::total_cmp);
+    rolls.sort_by(f64::total_cmp);
+    let roll_sd = 0.5 * (percentile_sorted(&rolls, 84.0) - percentile_sorted(&rolls, 16.0));
+    (
+        percentile_sorted(&fs, 16.0),
+        percentile_sorted(&fs, 84.0),
+        roll_sd,
+    )
 }
 
 /// Fit `(f, roll)` to the vehicles' edgelets near their VP2 rays with VP1 fixed; `roll0`
