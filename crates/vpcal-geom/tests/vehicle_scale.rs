@@ -5,7 +5,8 @@
 use proptest::prelude::*;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::vehicle_scale::{
-    cuboid_box, fit_cuboid, scale_from_vehicles, SizedBox, FLEET_LOG_SD, PASSENGER_CAR,
+    cuboid_box, fit_cuboid, fit_vehicle, scale_from_vehicles, vehicle_box, Cabin, SizedBox,
+    FLEET_LOG_SD, PASSENGER_CAR, PASSENGER_CAR_CABIN,
 };
 use vpcal_geom::Point2;
 
@@ -41,6 +42,44 @@ fn a_cuboid_is_recovered_from_its_image_box() {
     }
 }
 
+/// A car's outline (body and cabin) fits its own image exactly, lies inside its cuboid's box,
+/// and a cuboid fit of it reads the car small: the bias the outline removes.
+#[test]
+fn a_car_outline_is_recovered_and_a_cuboid_reads_it_small() {
+    // Looking 20° down at the road (VP1 above the principal point), 8° across it.
+    let pp = Point2::new(960.0, 540.0);
+    let (t, y) = (20f64.to_radians(), 8f64.to_radians());
+    let along = [y.sin(), -t.sin() * y.cos(), t.cos() * y.cos()];
+    let across = [y.cos(), t.sin() * y.sin(), -t.cos() * y.sin()];
+    let vp = |d: [f64; 3]| Point2::new(pp.x + 1600.0 * d[0] / d[2], pp.y + 1600.0 * d[1] / d[2]);
+    let cal = Calibration::from_vps(vp(along), vp(across), pp).unwrap();
+    let h = cal.plane_distance();
+    let size = h / 8.0;
+    let dims = PASSENGER_CAR.map(|d| d * size);
+    for centre in [[2.5, 0.1], [4.0, -0.3], [6.0, 0.4]] {
+        let c = [centre[0] * h, centre[1] * h];
+        let car = vehicle_box(&cal, c, 0.0, dims, PASSENGER_CAR_CABIN).unwrap();
+        let cuboid = cuboid_box(&cal, c, 0.0, dims).unwrap();
+        assert!(
+            car.x0 >= cuboid.x0 && car.x1 <= cuboid.x1,
+            "{car:?} {cuboid:?}"
+        );
+        assert!(
+            car.y0 > cuboid.y0 && car.y1 <= cuboid.y1,
+            "{car:?} {cuboid:?}"
+        );
+        let fit = fit_vehicle(&cal, car, 0.0, PASSENGER_CAR, PASSENGER_CAR_CABIN).unwrap();
+        assert!(
+            (fit.size / size - 1.0).abs() < 0.01,
+            "{} vs {size}",
+            fit.size
+        );
+        assert!(fit.rms < 1e-3, "{fit:?}");
+        let as_cuboid = fit_cuboid(&cal, car, 0.0, PASSENGER_CAR).unwrap();
+        assert!(as_cuboid.size < 0.97 * size, "{} vs {size}", as_cuboid.size);
+    }
+}
+
 #[test]
 fn the_scale_of_typical_cars_is_their_camera_height() {
     let cal = camera(1600.0, 15.0, 10.0);
@@ -62,14 +101,24 @@ fn the_scale_of_typical_cars_is_their_camera_height() {
         })
         .collect();
     assert!(boxes.len() >= 10);
-    let s = scale_from_vehicles(&cal, &boxes, 1920.0, 1080.0, PASSENGER_CAR, 1).unwrap();
+    let s =
+        scale_from_vehicles(&cal, &boxes, 1920.0, 1080.0, PASSENGER_CAR, Cabin::NONE, 1).unwrap();
     let est_height = s.m_per_unit * h;
     assert!((est_height / height_m - 1.0).abs() < 0.01, "{s:?}");
     // The interval carries the fleet's spread even when the sample agrees exactly.
     let width = (s.interval[1] / s.interval[0]).ln();
     assert!(width >= 2.0 * FLEET_LOG_SD * 0.99, "{s:?}");
     // Too few vehicles: no scale.
-    assert!(scale_from_vehicles(&cal, &boxes[..3], 1920.0, 1080.0, PASSENGER_CAR, 1).is_none());
+    assert!(scale_from_vehicles(
+        &cal,
+        &boxes[..3],
+        1920.0,
+        1080.0,
+        PASSENGER_CAR,
+        Cabin::NONE,
+        1
+    )
+    .is_none());
 }
 
 #[test]
@@ -87,7 +136,9 @@ fn boxes_cut_by_the_border_do_not_count() {
         };
         10
     ];
-    assert!(scale_from_vehicles(&cal, &boxes, 1920.0, 1080.0, PASSENGER_CAR, 1).is_none());
+    assert!(
+        scale_from_vehicles(&cal, &boxes, 1920.0, 1080.0, PASSENGER_CAR, Cabin::NONE, 1).is_none()
+    );
 }
 
 proptest! {

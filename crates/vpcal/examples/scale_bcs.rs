@@ -13,7 +13,9 @@ use std::path::PathBuf;
 use vpcal_formats::reference::{read_detections, ReferenceDetections};
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::optimal_scale;
-use vpcal_geom::vehicle_scale::{scale_from_vehicles, SizedBox, PASSENGER_CAR};
+use vpcal_geom::vehicle_scale::{
+    scale_from_vehicles, SizedBox, PASSENGER_CAR, PASSENGER_CAR_CABIN,
+};
 use vpcal_geom::Point2;
 
 fn main() {
@@ -47,7 +49,15 @@ fn main() {
                     .collect::<Vec<_>>()
             })
             .collect();
-        let Some(s) = scale_from_vehicles(&cal, &boxes, 1920.0, 1080.0, PASSENGER_CAR, 0) else {
+        let Some(s) = scale_from_vehicles(
+            &cal,
+            &boxes,
+            1920.0,
+            1080.0,
+            PASSENGER_CAR,
+            PASSENGER_CAR_CABIN,
+            0,
+        ) else {
             println!("{video}\t{}\t-", boxes.len());
             continue;
         };

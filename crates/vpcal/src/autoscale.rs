@@ -3,7 +3,9 @@
 
 use vpcal_formats::calib::FocalSensitivity;
 use vpcal_geom::camera::Calibration;
-use vpcal_geom::vehicle_scale::{scale_from_vehicles, SizedBox, VehicleScale, PASSENGER_CAR};
+use vpcal_geom::vehicle_scale::{
+    scale_from_vehicles, SizedBox, VehicleScale, PASSENGER_CAR, PASSENGER_CAR_CABIN,
+};
 use vpcal_geom::Point2;
 
 use crate::pipeline::{PipelineOutput, TrackBox};
@@ -64,6 +66,7 @@ fn scale_of(
         f64::from(size.0),
         f64::from(size.1),
         PASSENGER_CAR,
+        PASSENGER_CAR_CABIN,
         seed,
     )
 }

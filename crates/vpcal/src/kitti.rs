@@ -378,7 +378,8 @@ pub struct ScaleVehicle {
     pub frame: String,
     pub index: usize,
     pub bbox: [f64; 4],
-    /// With the car's own labelled dimensions: the cuboid-against-silhouette bias alone.
+    /// With the car's own labelled dimensions and the typical cabin: the outline model's bias
+    /// alone.
     pub own_dims_ratio: Option<f64>,
     pub own_dims_rms: Option<f64>,
     /// With the typical car ([`vpcal_geom::vehicle_scale::PASSENGER_CAR`]): what the
@@ -389,7 +390,7 @@ pub struct ScaleVehicle {
 
 /// The cuboid fit on every clean car of `frames` with a 3D label and a ground plane.
 pub fn scale_check(frames: &[KittiFrame]) -> Vec<ScaleVehicle> {
-    use vpcal_geom::vehicle_scale::{fit_cuboid, PASSENGER_CAR};
+    use vpcal_geom::vehicle_scale::{fit_vehicle, PASSENGER_CAR, PASSENGER_CAR_CABIN};
     let mut out = Vec::new();
     for frame in frames {
         let Some((cal, truth)) = frame_camera(frame) else {
@@ -408,7 +409,8 @@ pub fn scale_check(frames: &[KittiFrame]) -> Vec<ScaleVehicle> {
             let on = |k: usize| (0..3).map(|i| axes[i][k] * d[i]).sum::<f64>();
             let heading = on(1).atan2(on(0));
             let read = |dims: [f64; 3]| {
-                fit_cuboid(&cal, v.bbox, heading, dims).map(|fit| (1.0 / fit.size / truth, fit.rms))
+                fit_vehicle(&cal, v.bbox, heading, dims, PASSENGER_CAR_CABIN)
+                    .map(|fit| (1.0 / fit.size / truth, fit.rms))
             };
             let own = read([l, w, h]);
             let typical = read(PASSENGER_CAR);

@@ -29,6 +29,10 @@ pub struct KittiArgs {
     /// Device: `cpu`, or `wgpu` in builds with the `wgpu` feature.
     #[arg(long, default_value = "cpu", value_parser = super::args::device)]
     pub device: String,
+    /// Also run every crop mirrored and average its heatmaps with the crop's own, as
+    /// `calibrate --flip-average` does (twice the network work).
+    #[arg(long)]
+    pub flip_average: bool,
 }
 
 #[derive(Debug, serde::Serialize)]
@@ -66,6 +70,7 @@ pub fn run(a: KittiArgs) -> Result<()> {
     }
     let frames = kitti::read_truth(&a.data)?;
     let (net, model) = vpcal::model::load_model(a.model.as_deref(), &a.device)?;
+    let net = net.with_flip_average(a.flip_average);
     if a.edgelet_reach.is_nan() || a.edgelet_reach <= 0.0 {
         return Err(crate::cmd::UsageError(format!(
             "--edgelet-reach {}: expected a positive number of box diagonals",
@@ -89,6 +94,7 @@ pub fn run(a: KittiArgs) -> Result<()> {
     if a.json {
         let report = serde_json::json!({
             "model": model,
+            "flip_average": a.flip_average,
             "edgelet_rule": rule,
             "clean": clean_s,
             "others": rest_s,
@@ -96,7 +102,14 @@ pub fn run(a: KittiArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
-    println!("model: {model}");
+    println!(
+        "model: {model}{}",
+        if a.flip_average {
+            ", crops also mirrored (--flip-average)"
+        } else {
+            ""
+        }
+    );
     println!(
         "direction errors at the box centre, degrees (median / 90th percentile, vehicles with a value)"
     );
@@ -202,6 +215,11 @@ pub fn run_scale(a: KittiScaleArgs) -> Result<()> {
         let report = serde_json::json!({
             "cars": cars.len(),
             "typical_car_m": vpcal_geom::vehicle_scale::PASSENGER_CAR,
+            "cabin": {
+                "length": vpcal_geom::vehicle_scale::PASSENGER_CAR_CABIN.length,
+                "width": vpcal_geom::vehicle_scale::PASSENGER_CAR_CABIN.width,
+                "belt": vpcal_geom::vehicle_scale::PASSENGER_CAR_CABIN.belt,
+            },
             "own_dimensions": own,
             "typical_dimensions": typical,
         });
@@ -209,7 +227,8 @@ pub fn run_scale(a: KittiScaleArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "{} clean KITTI cars: metres per plane unit from each car's cuboid fit, over the truth",
+        "{} clean KITTI cars: metres per plane unit from each car's outline fit (body and \
+         cabin), over the truth",
         cars.len()
     );
     println!(
