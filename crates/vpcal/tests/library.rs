@@ -203,6 +203,7 @@ fn label_writes_crops_whose_vp1_is_the_true_one_and_refuses_stills() {
             0.5 * (m.det_box[0] + m.det_box[2]),
             0.5 * (m.det_box[1] + m.det_box[3]),
         );
+        assert!(m.det_box[3] - m.det_box[1] >= settings.min_box_height_px);
         let vp1 = Point2::from(r.vp1) + o;
         let err = line_angle_deg(at, vp1, truth.vp1);
         assert!(err < 1.5, "VP1 label {err:.2}° off at {at:?}");

@@ -29,6 +29,12 @@ pub struct Args {
     /// At most this many crops per vehicle track, evenly spaced along it.
     #[arg(long, default_value_t = LabelSettings::default().max_per_track)]
     pub per_track: usize,
+    /// Label only boxes at least this tall, pixels (the camera is fitted on all boxes either
+    /// way). `calibrate` sends smaller boxes to the network too: on far or low-resolution
+    /// cameras most vehicles are 10-24 px.
+    #[arg(long, value_name = "PX", default_value_t = LabelSettings::default().min_box_height_px,
+          value_parser = super::args::positive_f64)]
+    pub min_box_height: f64,
     /// Refuse a camera whose straight tracks point at VP1 worse than this (median, degrees).
     #[arg(long, default_value_t = LabelSettings::default().max_track_residual_deg)]
     pub max_track_residual: f64,
@@ -49,6 +55,7 @@ pub fn run(a: Args) -> Result<Exit> {
     let config = a.pipeline.config()?;
     let settings = LabelSettings {
         max_per_track: a.per_track,
+        min_box_height_px: a.min_box_height,
         max_track_residual_deg: a.max_track_residual,
         tangents: !a.no_tangents,
         ..LabelSettings::default()
@@ -116,6 +123,8 @@ pub fn run(a: Args) -> Result<Exit> {
         "detector": format!("{:?}", config.detector.choice),
         "every": config.frames.every,
         "label_sd0_deg": LABEL_SD0_DEG,
+        "min_box_height_px": settings.min_box_height_px,
+        "per_track": settings.max_per_track,
     });
     vpcal_synth::write_index(&a.output, &config_json, &records)?;
     eprintln!(
