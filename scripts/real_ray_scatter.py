@@ -8,13 +8,14 @@ is true; the tracks come from the detector's boxes, not from the network). Each 
 error is the angle, at its box centre, between the line to its predicted VP1 and the line to
 the reference VP1 (lines, so at most 90°). Printed per clip and model: the median and the
 90th percentile over the records, and their count; with `--split-px S`, also the medians of the
-records whose box's larger side (`box_scale`) is under S pixels and of the others (most rays on
+records whose box's larger side (twice the larger of the record's `box_scale`, which holds half
+the box's width and height) is under S pixels and of the others (most rays on
 far cameras come from small vehicles, where the network sees little).
 
 Usage:
   scripts/real_ray_scatter.py --vpcal target/release/vpcal --out OUT \
       --model bundled --model run/model.safetensors [--every 2] [--max-frames 300] \
-      [--split-px 45] CLIP...
+      [--split-px 90] CLIP...
 
 `--model bundled` is the model built into the binary. Clips whose tracks do not give VP1
 are reported as such (no reference).
@@ -96,7 +97,7 @@ def main():
                         continue
                     e = angle_deg(at, vp1, ref)
                     errs.append(e)
-                    size = max(it.get("box_scale") or [0.0])
+                    size = 2.0 * max(it.get("box_scale") or [0.0])
                     (small if size < a.split_px else large).append(e)
             med, p90 = percentile(errs, 0.5), percentile(errs, 0.9)
             label = os.path.basename(os.path.dirname(model)) + "/" + os.path.basename(model) if model != "bundled" else "bundled"
