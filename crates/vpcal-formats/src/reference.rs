@@ -414,6 +414,21 @@ impl ReferenceDetections {
             (h * b[2] + 1.0).trunc(),
         )
     }
+
+    /// This frame's boxes scored at least `min_score`, as [`ReferenceDetections::box_px`]
+    /// gives them in a `width` x `height` frame.
+    pub fn boxes_px(
+        &self,
+        min_score: f64,
+        width: u32,
+        height: u32,
+    ) -> impl Iterator<Item = BoxPx> + '_ {
+        self.boxes
+            .iter()
+            .zip(&self.scores)
+            .filter(move |(_, s)| **s >= min_score)
+            .map(move |(b, _)| Self::box_px(*b, width, height))
+    }
 }
 
 /// Read the reference's `detections.json`.

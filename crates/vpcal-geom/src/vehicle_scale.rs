@@ -177,17 +177,25 @@ pub fn vehicle_box_in(
         x1: f64::NEG_INFINITY,
         y1: f64::NEG_INFINITY,
     };
-    // (length fraction, width fraction, bottom and top as fractions of the height)
-    let body = (1.0, 1.0, 0.0, cabin.belt);
-    let top = (cabin.length, cabin.width, cabin.belt, 1.0);
-    for (lf, wf, z0, z1) in [body, top] {
+    // The hull's corners: the body's (full footprint, road to beltline) and the roof's (the
+    // cabin's footprint at the top). The cabin's bottom corners lie inside the body's top face
+    // and never bound the image; a cuboid (beltline at the top) is its body alone.
+    // (length fraction, width fraction, heights as fractions of the height)
+    let body: (f64, f64, &[f64]) = (1.0, 1.0, &[0.0, cabin.belt]);
+    let roof: (f64, f64, &[f64]) = (cabin.length, cabin.width, &[1.0]);
+    let parts: &[_] = if cabin.belt < 1.0 {
+        &[body, roof]
+    } else {
+        &[body]
+    };
+    for &(lf, wf, zs) in parts {
         for a in [-0.5, 0.5] {
             for w in [-0.5, 0.5] {
                 let (dx, dy) = (a * lf * dims[0], w * wf * dims[1]);
                 let x = centre[0] + dx * c - dy * s;
                 let y = centre[1] + dx * s + dy * c;
-                for z in [z0 * dims[2], z1 * dims[2]] {
-                    let p = pixel_of(cal, frame, [x, y, z])?;
+                for &z in zs {
+                    let p = pixel_of(cal, frame, [x, y, z * dims[2]])?;
                     b.x0 = b.x0.min(p.x);
                     b.y0 = b.y0.min(p.y);
                     b.x1 = b.x1.max(p.x);

@@ -10,7 +10,7 @@
 
 use std::path::PathBuf;
 
-use vpcal_formats::reference::{read_detections, ReferenceDetections};
+use vpcal_formats::reference::read_detections;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::optimal_scale;
 use vpcal_geom::vehicle_scale::{
@@ -36,17 +36,11 @@ fn main() {
         let boxes: Vec<SizedBox> = read_detections(&dir.join("detections.json"))
             .unwrap()
             .iter()
-            .flat_map(|f| {
-                f.boxes
-                    .iter()
-                    .zip(&f.scores)
-                    .filter(|(_, s)| **s >= 0.5)
-                    .map(|(b, _)| SizedBox {
-                        bbox: ReferenceDetections::box_px(*b, 1920, 1080),
-                        heading: None,
-                        group: None,
-                    })
-                    .collect::<Vec<_>>()
+            .flat_map(|f| f.boxes_px(0.5, 1920, 1080).collect::<Vec<_>>())
+            .map(|bbox| SizedBox {
+                bbox,
+                heading: None,
+                group: None,
             })
             .collect();
         let Some(s) = scale_from_vehicles(

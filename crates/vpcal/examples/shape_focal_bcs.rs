@@ -12,7 +12,7 @@
 
 use std::path::PathBuf;
 
-use vpcal_formats::reference::{read_detections, ReferenceDetections};
+use vpcal_formats::reference::read_detections;
 use vpcal_geom::camera::{orthogonal_vp_on_line, Calibration};
 use vpcal_geom::vehicle_scale::{fit_vehicle, Cabin, PASSENGER_CAR, PASSENGER_CAR_CABIN};
 use vpcal_geom::{BoxPx, Point2};
@@ -46,14 +46,7 @@ fn main() {
         let all: Vec<BoxPx> = read_detections(&dir.join("detections.json"))
             .unwrap()
             .iter()
-            .flat_map(|f| {
-                f.boxes
-                    .iter()
-                    .zip(&f.scores)
-                    .filter(|(_, s)| **s >= 0.5)
-                    .map(|(b, _)| ReferenceDetections::box_px(*b, 1920, 1080))
-                    .collect::<Vec<_>>()
-            })
+            .flat_map(|f| f.boxes_px(0.5, 1920, 1080).collect::<Vec<_>>())
             .filter(|b| b.is_valid() && b.clear_of_edges(1920.0, 1080.0, 2.0))
             .collect();
         let step = all.len().div_ceil(max).max(1);

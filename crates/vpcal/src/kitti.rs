@@ -388,7 +388,8 @@ pub struct ScaleVehicle {
     pub typical_rms: Option<f64>,
 }
 
-/// The cuboid fit on every clean car of `frames` with a 3D label and a ground plane.
+/// The outline fit (body and cabin) on every clean car of `frames` with a 3D label and a
+/// ground plane.
 pub fn scale_check(frames: &[KittiFrame]) -> Vec<ScaleVehicle> {
     use vpcal_geom::vehicle_scale::{fit_vehicle, PASSENGER_CAR, PASSENGER_CAR_CABIN};
     let mut out = Vec::new();
