@@ -57,6 +57,45 @@ pub fn weighted_median(values: &[f64], weights: &[f64]) -> Option<f64> {
     pairs.last().map(|p| p.0)
 }
 
+/// The shorth: the weighted mean of the densest half of `values`, the shortest interval
+/// holding at least half the total weight (Andrews et al. 1972). Like the median it ignores
+/// anything outside that half; unlike it, a one-sided tail of up to half the weight (vans and
+/// trucks among cars) moves it only as far as the tail reaches into the densest half. `None`
+/// when empty or when no weight is positive.
+pub fn weighted_shorth(values: &[f64], weights: &[f64]) -> Option<f64> {
+    let mut pairs: Vec<(f64, f64)> = values
+        .iter()
+        .zip(weights)
+        .filter(|(v, w)| v.is_finite() && w.is_finite() && **w > 0.0)
+        .map(|(v, w)| (*v, *w))
+        .collect();
+    if pairs.is_empty() {
+        return None;
+    }
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = pairs.iter().map(|p| p.1).sum();
+    // Two pointers: for each start i, the first end j whose window holds half the weight.
+    let (mut best, mut j, mut inside) = (None::<(f64, usize, usize)>, 0, 0.0);
+    for i in 0..pairs.len() {
+        while inside < total / 2.0 && j < pairs.len() {
+            inside += pairs[j].1;
+            j += 1;
+        }
+        if inside < total / 2.0 {
+            break;
+        }
+        let width = pairs[j - 1].0 - pairs[i].0;
+        if best.is_none_or(|b| width < b.0) {
+            best = Some((width, i, j));
+        }
+        inside -= pairs[i].1;
+    }
+    let (_, i, j) = best?;
+    let half = &pairs[i..j];
+    let w: f64 = half.iter().map(|p| p.1).sum();
+    Some(half.iter().map(|p| p.0 * p.1).sum::<f64>() / w)
+}
+
 /// Percentile `q` (0-100) of unsorted values, as [`percentile_sorted`].
 pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -273,6 +312,48 @@ mod tests {
         let p: Vec<f64> = (0..20_000).map(|_| a.poisson1()).collect();
         let mean = p.iter().sum::<f64>() / p.len() as f64;
         assert!((mean - 1.0).abs() < 0.03, "{mean}");
+    }
+
+    #[test]
+    fn the_shorth_stays_on_the_cluster_a_one_sided_tail_moves_the_median_off() {
+        // 60 cars spread evenly over ln size -0.05..0.05, 40 vans and trucks at 0.2..0.6.
+        let cars = (0..60).map(|i| -0.05 + 0.1 * f64::from(i) / 59.0);
+        let large = (0..40).map(|i| 0.2 + 0.4 * f64::from(i) / 39.0);
+        let v: Vec<f64> = cars.chain(large).collect();
+        let ones = vec![1.0; v.len()];
+        let shorth = weighted_shorth(&v, &ones).unwrap();
+        let median = weighted_median(&v, &ones).unwrap();
+        assert!(shorth.abs() < 0.02, "{shorth}");
+        assert!(median > 0.03, "{median}");
+        // Weights count as copies: weight 2 on one value is that value twice.
+        let w: Vec<f64> = (0..v.len())
+            .map(|i| if i == 99 { 2.0 } else { 1.0 })
+            .collect();
+        let mut twice = v.clone();
+        twice.push(v[99]);
+        let a = weighted_shorth(&v, &w).unwrap();
+        let b = weighted_shorth(&twice, &vec![1.0; twice.len()]).unwrap();
+        assert!((a - b).abs() < 1e-12, "{a} {b}");
+        assert_eq!(weighted_shorth(&[], &[]), None);
+        assert_eq!(weighted_shorth(&[1.0, 2.0], &[0.0, 0.0]), None);
+        assert_eq!(weighted_shorth(&[3.0], &[1.0]), Some(3.0));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_shorth_lies_in_the_data_and_moves_with_it(
+            v in proptest::collection::vec(-10.0f64..10.0, 1..60),
+            shift in -5.0f64..5.0,
+        ) {
+            let ones = vec![1.0; v.len()];
+            let s = weighted_shorth(&v, &ones).unwrap();
+            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            proptest::prop_assert!(s >= lo - 1e-9 && s <= hi + 1e-9);
+            let moved: Vec<f64> = v.iter().map(|x| x + shift).collect();
+            let t = weighted_shorth(&moved, &ones).unwrap();
+            proptest::prop_assert!((t - s - shift).abs() < 1e-6, "{} {} {}", s, t, shift);
+        }
     }
 
     #[test]
