@@ -23,6 +23,7 @@
 //! [`fit_vp1`] does the same for VP1 with the edges *along* the vehicles, for inputs where no
 //! vehicle tracks give VP1.
 
+use super::focal::{FocalSource, Likelihood, Measured};
 use super::line_angle_diff;
 use super::tracks::Tangent;
 use crate::point::Point2;
@@ -219,6 +220,47 @@ impl EdgeletFit {
     /// of `ln f`).
     pub fn focal_log_spread(&self) -> f64 {
         0.5 * (self.focal_px_p84 / self.focal_px_p16).ln()
+    }
+
+    fn measured(&self) -> Measured {
+        Measured {
+            name: "edgelets",
+            focal_px: self.focal_px,
+            bootstrap_px: [self.focal_px_p16, self.focal_px_p84],
+            turn: self.focal_bias_log_spread,
+        }
+    }
+}
+
+/// The straight-road fit's focal length, where it passes its identifiability gates
+/// ([`EdgeletFit::focal_usable`]: beyond them it fails in ways its bootstrap and the edges'
+/// turn do not show; docs/accuracy.md §19).
+impl FocalSource for EdgeletFit {
+    fn name(&self) -> &'static str {
+        "edgelets"
+    }
+
+    fn likelihood(&self) -> Option<Likelihood> {
+        self.focal_usable
+            .then(|| self.measured().likelihood())
+            .flatten()
+    }
+}
+
+/// The curved-road fit's focal length, from its bootstrap.
+impl FocalSource for CurvedFit {
+    fn name(&self) -> &'static str {
+        "curved_edgelets"
+    }
+
+    fn likelihood(&self) -> Option<Likelihood> {
+        Measured {
+            name: self.name(),
+            focal_px: self.focal_px,
+            bootstrap_px: [self.focal_px_p16, self.focal_px_p84],
+            turn: 0.0,
+        }
+        .likelihood()
     }
 }
 

@@ -115,6 +115,58 @@ pub struct Cue {
     pub likelihood: Likelihood,
 }
 
+/// A source of evidence on the focal length: every fit that can say something about `f`
+/// (the straight and the curved edgelet fits, the network's trusted and untrusted VP2 rays,
+/// the user's known lengths) implements it, and the posterior ([`fuse`]) consumes what each
+/// says ([`cues_of`]). Whether a source applies to the scene at all (a curved road, edges
+/// parallel in the image) is the aggregator's choice of sources; whether its own fit holds
+/// is the source's.
+pub trait FocalSource {
+    /// Its name in `focal_source` and `evidence.focal_cues` (e.g. `edgelets`).
+    fn name(&self) -> &'static str;
+    /// Its likelihood over `ln f`; `None` where its fit says nothing (failed, or not
+    /// identified).
+    fn likelihood(&self) -> Option<Likelihood>;
+}
+
+/// The cues of the `sources` that speak, in their order.
+pub fn cues_of(sources: &[&dyn FocalSource]) -> Vec<Cue> {
+    sources
+        .iter()
+        .filter_map(|s| {
+            Some(Cue {
+                source: s.name(),
+                likelihood: s.likelihood()?,
+            })
+        })
+        .collect()
+}
+
+/// A focal length measured by a fit with a bootstrap: log-normal around it, with the
+/// bootstrap's spread, a systematic turn's and the model error ([`measured_log_sd`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measured {
+    pub name: &'static str,
+    pub focal_px: f64,
+    /// The bootstrap's 16th and 84th percentiles, pixels.
+    pub bootstrap_px: [f64; 2],
+    /// How far a systematic turn of the evidence moves `ln f` (0 where none was measured).
+    pub turn: f64,
+}
+
+impl FocalSource for Measured {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn likelihood(&self) -> Option<Likelihood> {
+        Some(Likelihood::LogNormal {
+            focal_px: self.focal_px,
+            log_sd: measured_log_sd(self.bootstrap_px, self.turn),
+        })
+    }
+}
+
 /// What became of one cue in the posterior.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CueReport {
@@ -379,6 +431,58 @@ mod tests {
     use super::*;
 
     const RANGE: [f64; 2] = [500.0, 3800.0];
+
+    /// A source that says nothing.
+    struct Silent;
+
+    impl FocalSource for Silent {
+        fn name(&self) -> &'static str {
+            "silent"
+        }
+
+        fn likelihood(&self) -> Option<Likelihood> {
+            None
+        }
+    }
+
+    #[test]
+    fn the_sources_that_speak_become_cues_in_their_order() {
+        let a = Measured {
+            name: "edgelets",
+            focal_px: 1200.0,
+            bootstrap_px: [1100.0, 1300.0],
+            turn: 0.1,
+        };
+        let b = Measured {
+            name: "network",
+            focal_px: 900.0,
+            bootstrap_px: [1.0, 1.0],
+            turn: 0.0,
+        };
+        let cues = cues_of(&[&a, &Silent, &b]);
+        assert_eq!(
+            cues.iter().map(|c| c.source).collect::<Vec<_>>(),
+            ["edgelets", "network"]
+        );
+        // A measured fit's spread: its bootstrap, its turn and the model error together.
+        let want = measured_log_sd([1100.0, 1300.0], 0.1);
+        assert_eq!(
+            cues[0].likelihood,
+            Likelihood::LogNormal {
+                focal_px: 1200.0,
+                log_sd: want
+            }
+        );
+        // A bootstrap without spread leaves the model error alone.
+        assert_eq!(
+            cues[1].likelihood,
+            Likelihood::LogNormal {
+                focal_px: 900.0,
+                log_sd: MODEL_LOG_SD
+            }
+        );
+        assert!(cues_of(&[&Silent]).is_empty());
+    }
 
     fn log_normal(source: &'static str, f: f64, sd: f64) -> Cue {
         Cue {

@@ -81,7 +81,7 @@
 //! `vpcal eval vpout` (ARCHITECTURE.md has the table).
 
 use super::edgelets::{self as edge, BoxEdgelets, CurvedVehicle, Edgelet, EdgeletFitOptions};
-use super::focal::{self, Cue, FocalPosterior, Likelihood};
+use super::focal::{self, FocalPosterior, FocalSource, Likelihood};
 use super::line_angle_diff;
 use super::scene_lines::{self, SceneLineOptions};
 use super::tracks::{self, TrackLine, TrackOptions};
@@ -1087,6 +1087,17 @@ struct RaysFocal {
     posterior: Option<[f64; 3]>,
 }
 
+/// The untrusted rays' likelihood ([`rays_focal_likelihood`]).
+impl FocalSource for RaysFocal {
+    fn name(&self) -> &'static str {
+        "network_rays"
+    }
+
+    fn likelihood(&self) -> Option<Likelihood> {
+        self.likelihood.clone()
+    }
+}
+
 /// What the VP2 rays alone say about the focal length under `model` (its VP1, no priors, no
 /// ray bias).
 fn rays_focal(model: &Vp2Model, w: &[f64], range_px: [f64; 2]) -> RaysFocal {
@@ -1640,52 +1651,31 @@ pub fn aggregate_with_scene(
     // only the curved fit (every car has its own VP2, so neither the rays nor the straight
     // edgelet fit apply); the rays and the edges across the vehicles not where those edges
     // are parallel in the image (a view straight down, where f cannot be observed).
-    let mut cues: Vec<Cue> = Vec::new();
-    match curved_fit {
-        Some(c) => cues.push(Cue {
-            source: "curved_edgelets",
-            likelihood: Likelihood::LogNormal {
-                focal_px: c.focal_px,
-                log_sd: focal::measured_log_sd([c.focal_px_p16, c.focal_px_p84], 0.0),
-            },
-        }),
-        None if !road_curved && !edges_parallel => {
-            if let Some(e) = usable.filter(|e| e.focal_usable) {
-                cues.push(Cue {
-                    source: "edgelets",
-                    likelihood: Likelihood::LogNormal {
-                        focal_px: e.focal_px,
-                        log_sd: focal::measured_log_sd(
-                            [e.focal_px_p16, e.focal_px_p84],
-                            e.focal_bias_log_spread,
-                        ),
-                    },
-                });
-            }
-            if rays_trusted {
-                let fs = samples.as_ref().map_or(&[][..], |s| &s.focal_px[..]);
-                let (lo, hi) = if fs.len() >= 2 {
-                    (percentile(fs.to_vec(), 16.0), percentile(fs.to_vec(), 84.0))
-                } else {
-                    (1.0, 1.0)
-                };
-                cues.push(Cue {
-                    source: "network",
-                    likelihood: Likelihood::LogNormal {
-                        focal_px: x[0].exp(),
-                        log_sd: focal::measured_log_sd([lo, hi], 0.0),
-                    },
-                });
-            }
-            if let Some(l) = rays.as_ref().and_then(|r| r.likelihood.clone()) {
-                cues.push(Cue {
-                    source: "network_rays",
-                    likelihood: l,
-                });
-            }
+    let trusted = rays_trusted.then(|| {
+        let fs = samples.as_ref().map_or(&[][..], |s| &s.focal_px[..]);
+        let bootstrap_px = if fs.len() >= 2 {
+            [percentile(fs.to_vec(), 16.0), percentile(fs.to_vec(), 84.0)]
+        } else {
+            [1.0, 1.0]
+        };
+        focal::Measured {
+            name: "network",
+            focal_px: x[0].exp(),
+            bootstrap_px,
+            turn: 0.0,
         }
-        None => {}
-    }
+    });
+    let sources: Vec<&dyn FocalSource> = match &curved_fit {
+        Some(c) => vec![c],
+        None if !road_curved && !edges_parallel => {
+            let edges = usable.as_ref().map(|e| e as &dyn FocalSource);
+            let trusted = trusted.as_ref().map(|t| t as &dyn FocalSource);
+            let rays = rays.as_ref().map(|r| r as &dyn FocalSource);
+            [edges, trusted, rays].into_iter().flatten().collect()
+        }
+        None => Vec::new(),
+    };
+    let cues = focal::cues_of(&sources);
     let focal = focal::fuse(range_px, &cues)
         .ok_or_else(|| not_enough(format!("invalid focal range {range_px:?} px")))?;
     let carried = |s: &str| focal.carried_by.contains(&s);
