@@ -150,6 +150,113 @@ impl std::str::FromStr for MarkingStandard {
     }
 }
 
+/// Lane-line standards of motorways in several countries (national regulations' figures,
+/// rounded): a name, the dashed lane line's period (line + gap) and the lane width. A road
+/// may follow none of them; the list says what the lane lines would imply under each
+/// ([`focal_by_standard`]), it does not choose.
+pub const STANDARDS: [(&str, MarkingStandard); 8] = [
+    (
+        "3 + 6 m, 3.5 m lanes (e.g. Czechia)",
+        MarkingStandard {
+            period_m: 9.0,
+            lane_width_m: 3.5,
+        },
+    ),
+    (
+        "2 + 7 m, 3.65 m lanes (UK motorways)",
+        MarkingStandard {
+            period_m: 9.0,
+            lane_width_m: 3.65,
+        },
+    ),
+    (
+        "3 + 9 m, 3.5 m lanes (e.g. Netherlands, Australia)",
+        MarkingStandard {
+            period_m: 12.0,
+            lane_width_m: 3.5,
+        },
+    ),
+    (
+        "10 + 30 ft, 12 ft lanes (US, MUTCD)",
+        MarkingStandard {
+            period_m: 12.19,
+            lane_width_m: 3.66,
+        },
+    ),
+    (
+        "3 + 10 m, 3.5 m lanes (France)",
+        MarkingStandard {
+            period_m: 13.0,
+            lane_width_m: 3.5,
+        },
+    ),
+    (
+        "6 + 9 m, 3.75 m lanes (China expressways)",
+        MarkingStandard {
+            period_m: 15.0,
+            lane_width_m: 3.75,
+        },
+    ),
+    (
+        "6 + 12 m, 3.75 m lanes (German motorways)",
+        MarkingStandard {
+            period_m: 18.0,
+            lane_width_m: 3.75,
+        },
+    ),
+    (
+        "8 + 12 m, 3.5 m lanes (Japan expressways)",
+        MarkingStandard {
+            period_m: 20.0,
+            lane_width_m: 3.5,
+        },
+    ),
+];
+
+/// The focal length the lane lines `lines` imply on camera `cal` (its VP1 and horizon held,
+/// spread `spread`, frames `width` pixels wide) under each of [`STANDARDS`]: name, period,
+/// lane width, and the fit's focal length, 68 % interval and misfit, or why none. Empty
+/// without a dashed line and a lane (the ratio of a length along the road to one across it
+/// is what carries `f`).
+pub fn focal_by_standard(
+    lines: &[LaneLine],
+    cal: &Calibration,
+    spread: crate::road_focal::CameraSpread,
+    width: f64,
+) -> Vec<Value> {
+    use crate::road_focal::{fit_focal_from_lengths, LengthFocalFit};
+    if standard_spans(lines, cal).is_empty() || lanes(lines, cal).is_empty() {
+        return Vec::new();
+    }
+    STANDARDS
+        .iter()
+        .map(|(name, std)| {
+            let lengths = standard_lengths(lines, cal, std);
+            let base = json!({
+                "standard": name,
+                "period_m": std.period_m,
+                "lane_width_m": std.lane_width_m,
+            });
+            let extra = match fit_focal_from_lengths(cal, &lengths, spread, width) {
+                LengthFocalFit::Measured(m) => json!({
+                    "focal_px": m.focal_px,
+                    "interval_px": m.interval_px,
+                    "chi2": m.chi2,
+                    "dof": m.dof,
+                }),
+                LengthFocalFit::NotIdentified(why) | LengthFocalFit::Inconsistent(why) => {
+                    json!({ "focal_px": Value::Null, "why": why })
+                }
+            };
+            let mut v = base;
+            if let (Value::Object(a), Value::Object(b)) = (&mut v, extra) {
+                a.extend(b);
+            }
+            v
+        })
+        .collect()
+}
+
 /// The dashes of a dashed line.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Dashes {
@@ -786,6 +893,33 @@ mod tests {
         let widths = lane_widths(&bars, &cal, s);
         assert_eq!(widths.len(), 3, "{widths:?}");
         assert!(widths.iter().all(|w| (w - 3.5).abs() < 0.2), "{widths:?}");
+    }
+
+    #[test]
+    fn each_standard_implies_its_own_focal_length() {
+        // 3 + 6 m dashes and 3.5 m lanes (the first standard), seen at 1500 px and read on
+        // a camera with the right VP1 and horizon and the wrong focal length.
+        let truth = camera(1500.0);
+        let lines = lane_lines(&scene(&truth, scale(&truth)), truth.vp1);
+        let wrong =
+            crate::road_focal::camera_with_focal(&truth, 3000.0).unwrap_or_else(|| unreachable!());
+        let spread = crate::road_focal::CameraSpread::floored(None, 1280.0);
+        let rows = focal_by_standard(&lines, &wrong, spread, 1280.0);
+        assert_eq!(rows.len(), STANDARDS.len());
+        let focal = |i: usize| rows[i]["focal_px"].as_f64().unwrap_or(f64::NAN);
+        assert!((focal(0) / 1500.0 - 1.0).abs() < 0.01, "{}", rows[0]);
+        // A longer period for the same painted lattice stretches the road: every other
+        // standard reads another focal length, and the one with the ratio furthest from
+        // the truth's (20 m over 3.5 m against 9 over 3.5) the furthest.
+        let off: Vec<f64> = (0..rows.len())
+            .map(|i| (focal(i) / 1500.0).ln().abs())
+            .collect();
+        assert!(off[1..].iter().all(|o| *o > 0.01), "{off:?}");
+        let furthest = (0..off.len()).max_by(|a, b| off[*a].total_cmp(&off[*b]));
+        assert_eq!(furthest, Some(STANDARDS.len() - 1), "{off:?}");
+        // Without a dashed line there is nothing to say.
+        let solid: Vec<LaneLine> = lines.into_iter().filter(|l| l.dashes.is_none()).collect();
+        assert!(focal_by_standard(&solid, &wrong, spread, 1280.0).is_empty());
     }
 
     #[test]

@@ -205,7 +205,26 @@ pub fn calibrated_run_file(
         (road.file, Some(fit.scale), road.cal)
     };
     if !lines.is_empty() {
-        let summary = crate::markings::summary(&lines, &camera, scale);
+        let mut summary = crate::markings::summary(&lines, &camera, scale);
+        // What the lines would imply under each common standard, on the footage's own
+        // camera (VP1 and horizon), whatever carried the focal length.
+        let width = f64::from(out.info.width);
+        let spread = file
+            .confidence
+            .as_ref()
+            .map(|c| crate::road_focal::CameraSpread {
+                vp1_sd_px: c.vp1_sd_px,
+                horizon_angle_sd_deg: c.horizon_angle_sd_deg,
+            });
+        let by_standard = crate::markings::focal_by_standard(
+            &lines,
+            cal,
+            crate::road_focal::CameraSpread::floored(spread, width),
+            width,
+        );
+        if let Value::Object(m) = &mut summary {
+            m.insert("focal_by_standard".to_string(), Value::Array(by_standard));
+        }
         let evidence = file
             .evidence
             .get_or_insert_with(|| Value::Object(Map::new()));
