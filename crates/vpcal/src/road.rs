@@ -54,6 +54,21 @@ impl RoadCamera {
         RoadCamera::new(file, &path.display().to_string())
     }
 
+    /// The focal lengths the file's run assumed possible, pixels: its `--focal-range`
+    /// (`settings.focal_range`), else the 15-90° band of frames `width` pixels wide.
+    pub fn focal_range_px(&self, width: f64) -> [f64; 2] {
+        let given = self.file.settings.get("focal_range").and_then(|r| {
+            let r = r.as_array()?;
+            match r.as_slice() {
+                [a, b] => Some([a.as_f64()?, b.as_f64()?]),
+                _ => None,
+            }
+        });
+        given.unwrap_or_else(|| {
+            vpcal_geom::aggregate::robust::focal_prior_range_widths(None).map(|r| r * width)
+        })
+    }
+
     /// Metres per road unit, or 1 without a scale (distances then in road units).
     pub fn scale_or_one(&self) -> f64 {
         self.scale.unwrap_or(1.0)
@@ -224,21 +239,9 @@ impl RoadCamera {
             }
             LengthFocalFit::Measured(m) => m,
         };
-        let Some(c) = combine(&m, &prior, self.lengths_source) else {
-            let why = if prior.source == "given" {
-                format!(
-                    "the focal length was given (--focal); the lengths alone give {:.0} px \
-                     (68% {:.0}-{:.0})",
-                    m.focal_px, m.interval_px[0], m.interval_px[1]
-                )
-            } else {
-                format!(
-                    "the lengths give {:.0} px but only to 68% {:.0}-{:.0} px, no narrower than \
-                     the assumed range",
-                    m.focal_px, m.interval_px[0], m.interval_px[1]
-                )
-            };
-            return FocalRefit::Kept(why);
+        let c = match combine(&m, &prior, self.lengths_source, self.focal_range_px(width)) {
+            Ok(c) => c,
+            Err(why) => return FocalRefit::Kept(why),
         };
         let Some(camera) = crate::road_focal::camera_with_focal(&self.cal, c.focal_px) else {
             return FocalRefit::Kept("the combined focal length gives no camera".to_string());

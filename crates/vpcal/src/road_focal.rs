@@ -24,6 +24,7 @@ use vpcal_geom::camera::{orthogonal_vp_on_line, Calibration};
 use vpcal_geom::{Line, Point2};
 
 use crate::road::{RoadMeasure, ScaleInput};
+use vpcal_geom::aggregate::focal::{self, Cue, Likelihood};
 
 /// Standard deviation of a clicked pixel, per coordinate: a person marking the ends of a lane
 /// line or a taped distance on a frame.
@@ -423,23 +424,26 @@ pub struct PriorFocal {
     pub source: String,
 }
 
-/// The focal length after the lengths: their measurement combined with the calibration's.
+/// The focal length after the lengths: their measurement and the calibration's in one
+/// posterior.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CombinedFocal {
     pub focal_px: f64,
     pub interval_px: [f64; 2],
-    /// The lengths' name (`distances`, `markings`), or `<name>+<source>` where both carried at
-    /// least
-    /// [`MIN_SHARE`] of the weight.
+    /// The lengths' name (`distances`, `markings`), the calibration's source where the lengths
+    /// carried too little, or `<name>+<source>` where both carried at least
+    /// [`focal::MIN_CARRY_SHARE`] of the information.
     pub source: String,
-    /// The lengths' share of the weight, 0-1.
+    /// The lengths' share of the information, 0-1 (0 when they were left out).
     pub lengths_share: f64,
-    /// Set when the two disagree beyond two standard deviations of both.
+    /// Set when the lengths and the calibration's measured focal length contradict each other
+    /// (more than [`focal::CONFLICT_SD`] standard errors of their difference apart): the less
+    /// informative is left out, and this says which.
     pub disagreement: Option<String>,
 }
 
-/// The least share of the weight for a source to be named as carrying the focal length.
-pub const MIN_SHARE: f64 = 0.2;
+/// The name of the calibration's own measured focal length among the cues of [`combine`].
+const FOOTAGE: &str = "footage";
 
 /// Half the log width of a 68 % interval: its standard deviation in `ln f`.
 fn log_sd_of(interval: [f64; 2]) -> Option<f64> {
@@ -447,58 +451,104 @@ fn log_sd_of(interval: [f64; 2]) -> Option<f64> {
     (lo.is_finite() && lo > 0.0 && hi > lo).then(|| 0.5 * (hi / lo).ln())
 }
 
-/// One focal length from the lengths' `m` (called `name` in the source) and the
-/// calibration's `prior`, each a log-normal
-/// likelihood: the inverse-variance mean in `ln f`. An assumed focal length (`prior`: the
-/// 15-90° band, uniform in `ln f`) adds nothing where the lengths are narrower than it, and
-/// is kept where they are wider (`None`); a given one (`--focal`) is kept too. Where a
-/// measured focal length and the lengths disagree by more than two standard deviations of
-/// both, they are still combined (the interval then holds neither well), and `disagreement`
-/// says so.
-pub fn combine(m: &LengthFocal, prior: &PriorFocal, name: &str) -> Option<CombinedFocal> {
-    let (fm, sm) = (m.focal_px.ln(), m.log_sd.max(1e-9));
+/// One focal length from the lengths' `m` (called `name` in the source) and the calibration's
+/// `prior`, by the same posterior as the footage's cues ([`focal::fuse`]): the lengths are a
+/// log-normal cue, and so is a measured focal length (its interval's half log width). The
+/// prior is uniform in `ln f` over `range_px` (the run's `--focal-range` or the 15-90° band),
+/// widened to the lengths' own focal length where they lie beyond it and measure `f` better
+/// than it: known lengths measure the camera, and the band is a convention about traffic
+/// cameras, not a bound on them. An assumed focal length is that prior, not a cue.
+///
+/// `Err` (why) where the calibration keeps its focal length: a given one (`--focal`), or an
+/// assumed one the lengths measure less well than the prior.
+pub fn combine(
+    m: &LengthFocal,
+    prior: &PriorFocal,
+    name: &'static str,
+    range_px: [f64; 2],
+) -> Result<CombinedFocal, String> {
     if prior.source == "given" {
-        return None;
+        return Err(format!(
+            "the focal length was given (--focal); the lengths alone give {:.0} px (68% \
+             {:.0}-{:.0})",
+            m.focal_px, m.interval_px[0], m.interval_px[1]
+        ));
     }
-    let prior_sd = prior.interval_px.and_then(log_sd_of);
-    let alone = CombinedFocal {
-        focal_px: m.focal_px,
-        interval_px: m.interval_px,
-        source: name.to_string(),
-        lengths_share: 1.0,
-        disagreement: None,
+    let lengths = Cue {
+        source: name,
+        likelihood: Likelihood::LogNormal {
+            focal_px: m.focal_px,
+            log_sd: m.log_sd.max(1e-9),
+        },
     };
-    let Some(sp) = prior_sd.filter(|_| prior.focal_px.is_finite() && prior.focal_px > 0.0) else {
-        return Some(alone);
-    };
-    if prior.source == "prior" {
-        return (sm < sp).then_some(alone);
-    }
-    let fp = prior.focal_px.ln();
-    let (wm, wp) = (1.0 / (sm * sm), 1.0 / (sp * sp));
-    let share = wm / (wm + wp);
-    let f = (share * fm + (1.0 - share) * fp).exp();
-    let sd = (1.0 / (wm + wp)).sqrt();
-    let disagreement = ((fm - fp).abs() > 2.0 * (sm * sm + sp * sp).sqrt()).then(|| {
-        format!(
-            "the known lengths give a focal length of {:.0} px (68% {:.0}-{:.0}), the footage \
-             {:.0} px ({}): one of them is wrong; check the lengths' pixels, or calibrate \
-             with --focal PX if the lens is known",
-            m.focal_px, m.interval_px[0], m.interval_px[1], prior.focal_px, prior.source
-        )
-    });
-    let source = if share >= 1.0 - MIN_SHARE {
-        name.to_string()
-    } else if share < MIN_SHARE {
-        prior.source.clone()
+    let footage = prior
+        .interval_px
+        .and_then(log_sd_of)
+        .filter(|_| prior.source != "prior" && prior.focal_px.is_finite() && prior.focal_px > 0.0)
+        .map(|log_sd| Cue {
+            source: FOOTAGE,
+            likelihood: Likelihood::LogNormal {
+                focal_px: prior.focal_px,
+                log_sd,
+            },
+        });
+    // Lengths that measure f better than the band would, with their peak beyond it, move the
+    // band's end to their peak (the prior's soft edge then lets them carry f past it).
+    let band_sd = (range_px[1] / range_px[0]).ln() / 12f64.sqrt();
+    let range = if m.log_sd < band_sd && m.focal_px.is_finite() {
+        [range_px[0].min(m.focal_px), range_px[1].max(m.focal_px)]
     } else {
-        format!("{name}+{}", prior.source)
+        range_px
     };
-    Some(CombinedFocal {
-        focal_px: f,
-        interval_px: [f * (-sd).exp(), f * sd.exp()],
-        source,
-        lengths_share: share,
+    let cues: Vec<Cue> = std::iter::once(lengths).chain(footage).collect();
+    let posterior =
+        focal::fuse(range, &cues).ok_or_else(|| format!("invalid focal range {range_px:?}"))?;
+    if !posterior.measured {
+        return Err(format!(
+            "the lengths give {:.0} px but only to 68% {:.0}-{:.0} px, less than the assumed \
+             range says",
+            m.focal_px, m.interval_px[0], m.interval_px[1]
+        ));
+    }
+    let named = |s: &str| {
+        if s == FOOTAGE {
+            prior.source.clone()
+        } else {
+            s.to_string()
+        }
+    };
+    // The lengths first, then the footage's source, as `focal_source` has always read.
+    let carried: Vec<String> = [name, FOOTAGE]
+        .iter()
+        .filter(|s| posterior.carried_by.contains(s))
+        .map(|s| named(s))
+        .collect();
+    let disagreement = posterior
+        .cues
+        .iter()
+        .find(|c| c.contradicts == Some(FOOTAGE) || c.contradicts == Some(name))
+        .map(|c| {
+            format!(
+                "the known lengths give a focal length of {:.0} px (68% {:.0}-{:.0}), the \
+                 footage {:.0} px ({}): one of them is wrong, and {} was left out; check the \
+                 lengths' pixels, or calibrate with --focal PX if the lens is known",
+                m.focal_px,
+                m.interval_px[0],
+                m.interval_px[1],
+                prior.focal_px,
+                prior.source,
+                if c.source == name {
+                    "the less informative, the lengths',"
+                } else {
+                    "the less informative, the footage's,"
+                }
+            )
+        });
+    Ok(CombinedFocal {
+        focal_px: posterior.focal_px,
+        interval_px: posterior.interval_px,
+        source: carried.join("+"),
+        lengths_share: posterior.cues[0].share,
         disagreement,
     })
 }
@@ -679,6 +729,9 @@ mod tests {
         }
     }
 
+    /// The 15-90° band of 1280-px frames.
+    const BAND: [f64; 2] = [640.0, 4862.0];
+
     #[test]
     fn the_combination_weighs_each_focal_length_by_its_precision() {
         // Equal precision: the geometric mean, the interval narrower by sqrt(2).
@@ -686,33 +739,46 @@ mod tests {
             &measured(1000.0, 0.1),
             &prior(1210.0, 0.1, "edgelets"),
             "distances",
+            BAND,
         )
         .unwrap();
-        assert!((c.focal_px - 1100.0).abs() < 1.0, "{}", c.focal_px);
+        assert!((c.focal_px / 1100.0 - 1.0).abs() < 0.002, "{}", c.focal_px);
         assert_eq!(c.source, "distances+edgelets");
         let sd = log_sd_of(c.interval_px).unwrap();
-        assert!((sd - 0.1 / 2f64.sqrt()).abs() < 1e-9);
+        assert!((sd / (0.1 / 2f64.sqrt()) - 1.0).abs() < 0.03, "{sd}");
         assert!(c.disagreement.is_none());
-        // Far more precise lengths carry it alone; far vaguer ones leave the footage's.
+        // Far more precise lengths that contradict the footage: the footage's is left out.
         let c = combine(
             &measured(1000.0, 0.02),
             &prior(1300.0, 0.05, "edgelets"),
             "distances",
+            BAND,
         )
         .unwrap();
         assert_eq!(c.source, "distances");
-        assert!(c.disagreement.is_some(), "4.9 sd apart");
+        assert!((c.focal_px / 1000.0 - 1.0).abs() < 0.002, "{}", c.focal_px);
+        assert!(
+            c.disagreement
+                .as_ref()
+                .is_some_and(|d| d.contains("footage's")),
+            "4.9 sd apart: {:?}",
+            c.disagreement
+        );
         let c = combine(
             &measured(1000.0, 0.02),
             &prior(1300.0, 0.2, "edgelets"),
             "distances",
+            BAND,
         )
         .unwrap();
         assert!(c.disagreement.is_none(), "1.3 sd apart");
+        assert_eq!(c.source, "distances");
+        // Far vaguer lengths leave the footage's.
         let c = combine(
             &measured(300.0, 3.0),
             &prior(850.0, 0.2, "edgelets"),
             "distances",
+            BAND,
         )
         .unwrap();
         assert_eq!(c.source, "edgelets");
@@ -725,20 +791,40 @@ mod tests {
             &measured(3000.0, 0.05),
             &prior(2646.0, 0.7, "prior"),
             "distances",
+            BAND,
         )
         .unwrap();
-        assert_eq!((c.focal_px, c.source.as_str()), (3000.0, "distances"));
+        assert_eq!(c.source, "distances");
+        assert!((c.focal_px / 3000.0 - 1.0).abs() < 0.002, "{}", c.focal_px);
         assert!(combine(
             &measured(3000.0, 1.5),
             &prior(2646.0, 0.7, "prior"),
-            "distances"
+            "distances",
+            BAND
         )
-        .is_none());
+        .is_err());
         assert!(combine(
             &measured(3000.0, 0.01),
             &prior(2646.0, 0.0, "given"),
-            "distances"
+            "distances",
+            BAND
         )
-        .is_none());
+        .is_err());
+    }
+
+    #[test]
+    fn precise_lengths_carry_the_focal_length_beyond_the_band() {
+        // A telephoto narrower than 15°: the band is a convention, the lengths a measurement.
+        for source in ["prior", "edgelets"] {
+            let c = combine(
+                &measured(7000.0, 0.03),
+                &prior(4500.0, 0.4, source),
+                "distances",
+                BAND,
+            )
+            .unwrap();
+            assert!((c.focal_px / 7000.0 - 1.0).abs() < 0.02, "{source}: {c:?}");
+            assert_eq!(c.source, "distances");
+        }
     }
 }

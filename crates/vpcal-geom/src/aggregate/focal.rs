@@ -215,18 +215,27 @@ fn variance(grid: &[f64], w: &[f64]) -> f64 {
         / total
 }
 
+/// The 16th, 50th and 84th percentiles of the weights `w` on the evenly spaced `grid` (`ln f`),
+/// pixels. Each weight is spread evenly over its cell, so the percentiles fall between grid
+/// points: a precise cue (known lengths measure `ln f` to 0.02, two cells) keeps its width.
 fn quantiles(grid: &[f64], w: &[f64]) -> [f64; 3] {
-    let mut cumulative = Vec::with_capacity(w.len());
-    let mut total = 0.0;
-    for v in w {
-        total += v;
-        cumulative.push(total);
-    }
+    let h = if grid.len() > 1 {
+        grid[1] - grid[0]
+    } else {
+        0.0
+    };
+    let total: f64 = w.iter().sum();
     let q = |q: f64| {
-        let i = cumulative
-            .partition_point(|c| *c < q * total)
-            .min(grid.len() - 1);
-        grid[i].exp()
+        let target = q * total;
+        let mut below = 0.0;
+        for (x, v) in grid.iter().zip(w) {
+            if *v > 0.0 && below + v >= target {
+                let t = ((target - below) / v).clamp(0.0, 1.0);
+                return (x - 0.5 * h + t * h).exp();
+            }
+            below += v;
+        }
+        grid.last().map_or(f64::NAN, |x| (x + 0.5 * h).exp())
     };
     [q(0.16), q(0.5), q(0.84)]
 }
@@ -530,6 +539,14 @@ mod tests {
         assert!(p.measured);
         assert_eq!(p.carried_by, vec!["edgelets"]);
         assert!((p.cues[0].share - 1.0).abs() < 1e-9);
+        // Narrower than two of the grid's cells: still its own value and width.
+        let p = fuse(RANGE, &[log_normal("distances", 1517.0, 0.02)]).unwrap();
+        assert!((p.focal_px / 1517.0 - 1.0).abs() < 0.002, "{}", p.focal_px);
+        let [lo, hi] = p.interval_px;
+        assert!(
+            (0.5 * (hi / lo).ln() / 0.02 - 1.0).abs() < 0.05,
+            "{lo} {hi}"
+        );
     }
 
     #[test]
