@@ -225,6 +225,10 @@ pub struct VehicleResult {
     pub network_vp2_deg: Option<f64>,
     /// The guess "VP1 at the principal point", degrees.
     pub pp_vp1_deg: Option<f64>,
+    /// The network's VP2 error with a sign: positive when its direction is turned from the
+    /// true one towards the direction to the true VP1 (a VP2 placed too near VP1 gives a
+    /// traffic camera too short a focal length, one turned away too long).
+    pub network_vp2_signed_deg: Option<f64>,
     /// VP2 from the vehicle's edgelets, degrees (`None`: too few edgelets).
     pub edgelet_vp2_deg: Option<f64>,
     /// The same with a sign: positive when the edgelet VP2's direction is turned from the
@@ -242,6 +246,14 @@ pub struct VehicleResult {
     /// The exact VPs, homogeneous.
     pub truth_vp1: [f64; 3],
     pub truth_vp2: [f64; 3],
+}
+
+/// The direction error at `centre` of `vp2` (homogeneous) against vehicle `v`'s true VP2,
+/// degrees, positive when turned towards the direction to its true VP1.
+fn towards_vp1_deg(centre: Point2, vp2: [f64; 3], v: &KittiVehicle) -> Option<f64> {
+    let err = signed_direction_error_deg(centre, vp2, v.vp2)?;
+    let vp1_side = signed_direction_error_deg(centre, v.vp1, v.vp2)?;
+    Some(err * vp1_side.signum())
 }
 
 /// Measure every vehicle of `frames` (`clean_only`: only the clean ones). `keep_edgelets` keeps
@@ -295,11 +307,8 @@ pub fn evaluate(
                 network_vp2_deg: direction_error_deg(centre, vp2.to_h(), v.vp2),
                 pp_vp1_deg: direction_error_deg(centre, frame.pp.to_h(), v.vp1),
                 edgelet_vp2_deg: fit.and_then(|f| direction_error_deg(centre, f.point, v.vp2)),
-                edgelet_vp2_signed_deg: fit.and_then(|f| {
-                    let err = signed_direction_error_deg(centre, f.point, v.vp2)?;
-                    let vp1_side = signed_direction_error_deg(centre, v.vp1, v.vp2)?;
-                    Some(err * vp1_side.signum())
-                }),
+                network_vp2_signed_deg: towards_vp1_deg(centre, vp2.to_h(), v),
+                edgelet_vp2_signed_deg: fit.and_then(|f| towards_vp1_deg(centre, f.point, v)),
                 edgelets_found: found.len(),
                 edgelets_used: used.len(),
                 network_vp1: finite(vp1),

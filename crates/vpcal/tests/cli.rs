@@ -403,12 +403,14 @@ fn aggregate_takes_the_focal_length_from_rays_that_place_a_near_vp2() {
     assert!(out.status.success(), "{}", stderr(&out));
     let calib = read_calibration(&path);
     assert_eq!(calib.focal_source.as_deref(), Some("network_rays"));
-    // When written: 2038 px (1768-2325) against the reference camera's 2032 px.
+    // 1956 px (1221-3014) against the reference camera's 2032 px, with the rays' scatter
+    // floored at 2° (at 1°: 2038 px, 1768-2325, where other files' rays missed the truth).
     let f = calib.focal_px.unwrap();
     assert!((f / f_true - 1.0).abs() < 0.1, "{f} vs {f_true}");
     let [lo, hi] = calib.focal_interval_px.unwrap();
     assert!(lo < f_true && f_true < hi, "{lo}-{hi}");
-    assert!((hi / lo).ln() < 0.5, "{lo}-{hi}");
+    // Narrower than the band's own 68 % (1328-5272 px at 1920 wide, 1.38 in ln f).
+    assert!((hi / lo).ln() < 1.0, "{lo}-{hi}");
     assert!(
         calib.warnings.iter().all(|w| !w.contains("assumed")),
         "{:?}",

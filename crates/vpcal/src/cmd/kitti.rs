@@ -45,6 +45,8 @@ struct Subset {
     /// Median of the signed edgelet VP2 direction errors (towards VP1 positive), degrees: the
     /// edges' systematic turn (the scatter averages out over many vehicles, this does not).
     edgelet_vp2_median_signed_deg: Option<f64>,
+    /// The same for the network's VP2: its systematic turn on real cars.
+    network_vp2_median_signed_deg: Option<f64>,
 }
 
 fn subset(results: &[&VehicleResult]) -> Subset {
@@ -55,13 +57,14 @@ fn subset(results: &[&VehicleResult]) -> Subset {
         network_vp2: s(|r| r.network_vp2_deg),
         pp_vp1: s(|r| r.pp_vp1_deg),
         edgelet_vp2: s(|r| r.edgelet_vp2_deg),
-        edgelet_vp2_median_signed_deg: vpcal_geom::solve::median(
-            &results
-                .iter()
-                .filter_map(|r| r.edgelet_vp2_signed_deg)
-                .collect::<Vec<_>>(),
-        ),
+        edgelet_vp2_median_signed_deg: signed(results, |r| r.edgelet_vp2_signed_deg),
+        network_vp2_median_signed_deg: signed(results, |r| r.network_vp2_signed_deg),
     }
+}
+
+/// The median of a signed error over `results` (those with a value).
+fn signed(results: &[&VehicleResult], f: fn(&VehicleResult) -> Option<f64>) -> Option<f64> {
+    vpcal_geom::solve::median(&results.iter().filter_map(|r| f(r)).collect::<Vec<_>>())
 }
 
 pub fn run(a: KittiArgs) -> Result<()> {
@@ -142,6 +145,9 @@ pub fn run(a: KittiArgs) -> Result<()> {
         );
     }
     for (label, s) in [("clean", Some(&clean_s)), ("others", rest_s.as_ref())] {
+        if let Some(b) = s.and_then(|s| s.network_vp2_median_signed_deg) {
+            println!("network VP2 turned towards VP1 ({label}, median signed error): {b:+.2} deg");
+        }
         if let Some(b) = s.and_then(|s| s.edgelet_vp2_median_signed_deg) {
             println!("edgelet VP2 turned towards VP1 ({label}, median signed error): {b:+.2} deg");
         }
