@@ -33,9 +33,9 @@ pub fn median(values: &[f64]) -> Option<f64> {
     })
 }
 
-/// Weighted median: a minimiser of `Σ w_i |x - x_i|` (the lower one when the minimum is a
-/// segment). `None` when empty or when no weight is positive.
-pub fn weighted_median(values: &[f64], weights: &[f64]) -> Option<f64> {
+/// The finite values with a finite positive weight, as `(value, weight)` sorted by value, and
+/// their total weight; `None` when there are none.
+fn sorted_weighted(values: &[f64], weights: &[f64]) -> Option<(Vec<(f64, f64)>, f64)> {
     let mut pairs: Vec<(f64, f64)> = values
         .iter()
         .zip(weights)
@@ -46,7 +46,14 @@ pub fn weighted_median(values: &[f64], weights: &[f64]) -> Option<f64> {
         return None;
     }
     pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let total: f64 = pairs.iter().map(|p| p.1).sum();
+    let total = pairs.iter().map(|p| p.1).sum();
+    Some((pairs, total))
+}
+
+/// Weighted median: a minimiser of `Σ w_i |x - x_i|` (the lower one when the minimum is a
+/// segment). `None` when empty or when no weight is positive.
+pub fn weighted_median(values: &[f64], weights: &[f64]) -> Option<f64> {
+    let (pairs, total) = sorted_weighted(values, weights)?;
     let mut acc = 0.0;
     for (v, w) in &pairs {
         acc += w;
@@ -63,17 +70,7 @@ pub fn weighted_median(values: &[f64], weights: &[f64]) -> Option<f64> {
 /// trucks among cars) moves it only as far as the tail reaches into the densest half. `None`
 /// when empty or when no weight is positive.
 pub fn weighted_shorth(values: &[f64], weights: &[f64]) -> Option<f64> {
-    let mut pairs: Vec<(f64, f64)> = values
-        .iter()
-        .zip(weights)
-        .filter(|(v, w)| v.is_finite() && w.is_finite() && **w > 0.0)
-        .map(|(v, w)| (*v, *w))
-        .collect();
-    if pairs.is_empty() {
-        return None;
-    }
-    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let total: f64 = pairs.iter().map(|p| p.1).sum();
+    let (pairs, total) = sorted_weighted(values, weights)?;
     // Two pointers: for each start i, the first end j whose window holds half the weight.
     let (mut best, mut j, mut inside) = (None::<(f64, usize, usize)>, 0, 0.0);
     for i in 0..pairs.len() {

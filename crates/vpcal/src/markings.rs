@@ -232,27 +232,24 @@ pub fn focal_by_standard(
         .iter()
         .map(|(name, std)| {
             let lengths = standard_lengths(lines, cal, std);
-            let base = json!({
+            let mut row = json!({
                 "standard": name,
                 "period_m": std.period_m,
                 "lane_width_m": std.lane_width_m,
+                "focal_px": Value::Null,
             });
-            let extra = match fit_focal_from_lengths(cal, &lengths, spread, width) {
-                LengthFocalFit::Measured(m) => json!({
-                    "focal_px": m.focal_px,
-                    "interval_px": m.interval_px,
-                    "chi2": m.chi2,
-                    "dof": m.dof,
-                }),
-                LengthFocalFit::NotIdentified(why) | LengthFocalFit::Inconsistent(why) => {
-                    json!({ "focal_px": Value::Null, "why": why })
+            match fit_focal_from_lengths(cal, &lengths, spread, width) {
+                LengthFocalFit::Measured(m) => {
+                    row["focal_px"] = json!(m.focal_px);
+                    row["interval_px"] = json!(m.interval_px);
+                    row["chi2"] = json!(m.chi2);
+                    row["dof"] = json!(m.dof);
                 }
-            };
-            let mut v = base;
-            if let (Value::Object(a), Value::Object(b)) = (&mut v, extra) {
-                a.extend(b);
+                LengthFocalFit::NotIdentified(why) | LengthFocalFit::Inconsistent(why) => {
+                    row["why"] = json!(why);
+                }
             }
-            v
+            row
         })
         .collect()
 }

@@ -209,17 +209,10 @@ pub fn calibrated_run_file(
         // What the lines would imply under each common standard, on the footage's own
         // camera (VP1 and horizon), whatever carried the focal length.
         let width = f64::from(out.info.width);
-        let spread = file
-            .confidence
-            .as_ref()
-            .map(|c| crate::road_focal::CameraSpread {
-                vp1_sd_px: c.vp1_sd_px,
-                horizon_angle_sd_deg: c.horizon_angle_sd_deg,
-            });
         let by_standard = crate::markings::focal_by_standard(
             &lines,
             cal,
-            crate::road_focal::CameraSpread::floored(spread, width),
+            crate::road_focal::CameraSpread::of_file(&file, width),
             width,
         );
         if let Value::Object(m) = &mut summary {

@@ -123,7 +123,8 @@ fn ev_u64(file: &CalibrationFile, key: &str) -> Option<u64> {
     ev(file, key)?.as_u64()
 }
 
-fn setting_pair(file: &CalibrationFile, key: &str) -> Option<[f64; 2]> {
+/// The setting `key` of `file` as a pair of numbers (e.g. `focal_range`), if it is one.
+pub(crate) fn setting_pair(file: &CalibrationFile, key: &str) -> Option<[f64; 2]> {
     let v = file.settings.get(key)?.as_array()?;
     match v.as_slice() {
         [a, b] => Some([a.as_f64()?, b.as_f64()?]),

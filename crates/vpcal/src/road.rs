@@ -57,14 +57,7 @@ impl RoadCamera {
     /// The focal lengths the file's run assumed possible, pixels: its `--focal-range`
     /// (`settings.focal_range`), else the 15-90° band of frames `width` pixels wide.
     pub fn focal_range_px(&self, width: f64) -> [f64; 2] {
-        let given = self.file.settings.get("focal_range").and_then(|r| {
-            let r = r.as_array()?;
-            match r.as_slice() {
-                [a, b] => Some([a.as_f64()?, b.as_f64()?]),
-                _ => None,
-            }
-        });
-        given.unwrap_or_else(|| {
+        crate::report::setting_pair(&self.file, "focal_range").unwrap_or_else(|| {
             vpcal_geom::aggregate::robust::focal_prior_range_widths(None).map(|r| r * width)
         })
     }
@@ -214,14 +207,10 @@ impl RoadCamera {
         } else {
             2.0 * self.cal.pp.x
         };
-        let measured = self.file.confidence.as_ref().map(|c| CameraSpread {
-            vp1_sd_px: c.vp1_sd_px,
-            horizon_angle_sd_deg: c.horizon_angle_sd_deg,
-        });
         let fit = fit_focal_from_lengths(
             &self.cal,
             inputs,
-            CameraSpread::floored(measured, width),
+            CameraSpread::of_file(&self.file, width),
             width,
         );
         let prior = PriorFocal {

@@ -77,6 +77,16 @@ impl CameraSpread {
             horizon_angle_sd_deg: at_least(m.horizon_angle_sd_deg, HORIZON_SD_FLOOR_DEG),
         }
     }
+
+    /// The spread calibration file `file` records (`confidence`), floored as
+    /// [`CameraSpread::floored`] for frames `width` pixels wide.
+    pub fn of_file(file: &vpcal_formats::calib::CalibrationFile, width: f64) -> CameraSpread {
+        let measured = file.confidence.as_ref().map(|c| CameraSpread {
+            vp1_sd_px: c.vp1_sd_px,
+            horizon_angle_sd_deg: c.horizon_angle_sd_deg,
+        });
+        CameraSpread::floored(measured, width)
+    }
 }
 
 /// The focal length the known lengths give, with the camera it makes.
