@@ -7,11 +7,9 @@ use proptest::prelude::*;
 use vpcal_geom::aggregate::edgelets::{
     self, fit_curved, near_rays, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
 };
-use vpcal_geom::aggregate::focal;
-use vpcal_geom::aggregate::robust::{
-    aggregate, aggregate_with_edgelets, focal_prior_range_widths, focal_widths,
-    rays_focal_likelihood, rays_focal_posterior, RobustOptions, TRAFFIC_FOV_DEG,
-};
+use vpcal_geom::aggregate::focal::{self, focal_prior_range_widths, focal_widths, TRAFFIC_FOV_DEG};
+use vpcal_geom::aggregate::rays::{rays_focal_likelihood, rays_focal_posterior};
+use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
 use vpcal_geom::aggregate::tracks::Tangent;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
@@ -882,7 +880,7 @@ fn vehicle_units_group_the_boxes_of_one_moving_vehicle() {
     }
     pairs.push(pair(None, 10.0, 10.0));
     pairs.push(pair(None, 10.0, 10.0));
-    let (unit, n) = vpcal_geom::aggregate::robust::vehicle_units(&pairs);
+    let (unit, n) = vpcal_geom::aggregate::vehicles::vehicle_units(&pairs);
     assert_eq!(n, 5, "{unit:?}");
     for k in 0..3 {
         let first = unit[k];

@@ -88,7 +88,7 @@ impl FocalSource {
     }
 }
 
-pub use vpcal_geom::aggregate::robust::TRAFFIC_FOV_DEG;
+pub use vpcal_geom::aggregate::focal::TRAFFIC_FOV_DEG;
 
 /// Model error of a measured focal length in `ln f` (the robust method's
 /// `focal::MODEL_LOG_SD`, part of every geometric cue's likelihood).
@@ -98,7 +98,8 @@ pub use vpcal_geom::aggregate::focal::MODEL_LOG_SD as MEASURED_FOCAL_MODEL_LOG_S
 /// central 68 % (16th to 84th percentile) of a distribution uniform in `ln f` over the focal
 /// lengths of [`TRAFFIC_FOV_DEG`] (`f = (W / 2) / tan(fov / 2)`).
 pub fn assumed_focal_interval(width: u32) -> [f64; 2] {
-    let [short, long] = robust::focal_prior_range_widths(None).map(|r| r * f64::from(width));
+    let [short, long] =
+        vpcal_geom::aggregate::focal::focal_prior_range_widths(None).map(|r| r * f64::from(width));
     range_focal_interval([short, long])
 }
 

@@ -15,7 +15,7 @@ use std::path::Path;
 
 use serde_json::Value;
 use vpcal_formats::calib::{CalibrationFile, Status};
-use vpcal_geom::aggregate::robust::{focal_prior_range_widths, TRAFFIC_FOV_DEG};
+use vpcal_geom::aggregate::focal::{focal_prior_range_widths, TRAFFIC_FOV_DEG};
 
 use crate::overlay::nice_step;
 use crate::tracks::VehicleTrack;

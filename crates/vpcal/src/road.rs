@@ -58,7 +58,7 @@ impl RoadCamera {
     /// (`settings.focal_range`), else the 15-90° band of frames `width` pixels wide.
     pub fn focal_range_px(&self, width: f64) -> [f64; 2] {
         crate::report::setting_pair(&self.file, "focal_range").unwrap_or_else(|| {
-            vpcal_geom::aggregate::robust::focal_prior_range_widths(None).map(|r| r * width)
+            vpcal_geom::aggregate::focal::focal_prior_range_widths(None).map(|r| r * width)
         })
     }
 

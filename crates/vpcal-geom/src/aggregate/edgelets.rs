@@ -188,7 +188,7 @@ pub struct BoxEdgelets<'a> {
     pub vp2: Point2,
     pub edgelets: &'a [Edgelet],
     /// The physical vehicle the box shows (boxes of one vehicle share it; see
-    /// `robust::vehicle_units`): the bootstrap resamples vehicles, not boxes.
+    /// `vehicles::vehicle_units`): the bootstrap resamples vehicles, not boxes.
     pub vehicle: usize,
 }
 

@@ -21,6 +21,36 @@
 //! the public CNNs' VP2 rays pulling an assumed focal length around doubled its median
 //! error).
 
+/// Horizontal fields of view of traffic cameras, degrees: from a telephoto view far along a
+/// motorway (15°) to a wide-angle view of a junction (90°). The focal-length prior comes from
+/// this range, not from any dataset's cameras.
+pub const TRAFFIC_FOV_DEG: [f64; 2] = [15.0, 90.0];
+
+/// The focal length of a horizontal field of view, in image widths: `0.5 / tan(fov / 2)`.
+pub fn focal_widths(fov_deg: f64) -> f64 {
+    0.5 / (fov_deg.to_radians() / 2.0).tan()
+}
+
+/// The focal-length prior as `(median, sd of ln f)` in image widths: a focal length uniform
+/// in `ln f` over [`TRAFFIC_FOV_DEG`] has its median at the geometric mean of the range's
+/// ends (1.38 widths, a 40° view) and a standard deviation of `ln(range) / sqrt(12)` (0.59).
+pub fn physical_focal_prior() -> (f64, f64) {
+    let (long, wide) = (
+        focal_widths(TRAFFIC_FOV_DEG[0]),
+        focal_widths(TRAFFIC_FOV_DEG[1]),
+    );
+    ((long * wide).sqrt(), (long / wide).ln() / 12f64.sqrt())
+}
+
+/// The focal-length prior's range in image widths, `[short, long]`: `range`, or the focal
+/// lengths of [`TRAFFIC_FOV_DEG`] (0.5-3.8 widths).
+pub fn focal_prior_range_widths(range: Option<[f64; 2]>) -> [f64; 2] {
+    range.unwrap_or([
+        focal_widths(TRAFFIC_FOV_DEG[1]),
+        focal_widths(TRAFFIC_FOV_DEG[0]),
+    ])
+}
+
 /// Points of the `ln f` grid over the prior's range.
 pub const GRID: usize = 400;
 

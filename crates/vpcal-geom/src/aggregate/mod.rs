@@ -7,14 +7,18 @@
 //!   length, roll and the CNN's ray bias fitted to the vehicles' VP2 rays with weak priors;
 //!   duplicate and small boxes down-weighted; bootstrap confidence.
 
+mod bootstrap;
 pub mod edgelets;
 pub mod focal;
+pub mod rays;
 pub mod reference;
 pub mod robust;
 pub mod scene_lines;
 pub mod sizes;
 pub mod tracks;
 pub mod vehicle_vp;
+pub mod vehicles;
+mod vp1;
 
 use crate::point::{BoxPx, Point2};
 

@@ -443,3 +443,109 @@ pub fn tangents(
     }
     out
 }
+
+/// How many of the track lines bend with `|bend_t| > min_t` and `|bend_deg| > min_deg`
+/// towards the same side (the larger count of the two sides), the lines' directions first
+/// oriented alike (doubled-angle mean).
+pub fn bending_the_same_way(lines: &[TrackLine], min_t: f64, min_deg: f64) -> usize {
+    let (c, s) = lines.iter().fold((0.0, 0.0), |(c, s), t| {
+        let a = 2.0 * t.dir.y.atan2(t.dir.x);
+        (c + a.cos(), s + a.sin())
+    });
+    let mean = 0.5 * f64::atan2(s, c);
+    let reference = Point2::new(mean.cos(), mean.sin());
+    let (mut left, mut right) = (0, 0);
+    for t in lines {
+        let sign = if t.dir.dot(reference) >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        let (bt, bd) = (sign * t.bend_t, sign * t.bend_deg);
+        if bt > min_t && bd > min_deg {
+            left += 1;
+        } else if bt < -min_t && bd < -min_deg {
+            right += 1;
+        }
+    }
+    left.max(right)
+}
+
+/// When the tracks say the road curves: the fields `curved_bend_t`, `curved_bend_deg`,
+/// `curved_share`, `min_curved_tracks` and `curved_max_se_deg` of
+/// [`RobustOptions`](super::robust::RobustOptions).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct CurveTest {
+    pub bend_t: f64,
+    pub bend_deg: f64,
+    pub share: f64,
+    pub min_tracks: usize,
+    pub max_se_deg: f64,
+}
+
+/// The vehicles' tracks and what they say about the road.
+#[derive(Debug, Clone)]
+pub(super) struct RoadTracks {
+    /// The (frame, box) of every pair the tracker may use, and the pair each came from.
+    pub boxes: Vec<(f64, BoxPx)>,
+    pub pairs: Vec<usize>,
+    /// The tracker's tracks (indices into `boxes`).
+    pub links: Vec<Vec<usize>>,
+    /// The lines of the straight tracks: VP1 evidence.
+    pub straight: Vec<TrackLine>,
+    /// Tracks that bend significantly the same way, and whether they make the road curved.
+    pub curved_tracks: usize,
+    pub road_curved: bool,
+}
+
+impl RoadTracks {
+    /// Link `boxes` (`pairs[i]` the pair of `boxes[i]`) into tracks with `options` (`None`:
+    /// no tracks) in a `frame` of `[width, height]` pixels, and test the road for a curve.
+    pub(super) fn of(
+        boxes: Vec<(f64, BoxPx)>,
+        pairs: Vec<usize>,
+        options: Option<&TrackOptions>,
+        frame: [f64; 2],
+        curve: &CurveTest,
+    ) -> RoadTracks {
+        let links = options.map_or_else(Vec::new, |t| link(&boxes, t));
+        // Every track long enough, straight or not (a curve's tracks are the evidence that
+        // the road curves), and the straight ones, which are VP1 evidence.
+        let (moving, straight): (Vec<TrackLine>, Vec<TrackLine>) = match options {
+            Some(t) => {
+                let any_shape = TrackOptions {
+                    max_rms_fraction: f64::INFINITY,
+                    frame: Some(frame),
+                    ..t.clone()
+                };
+                let moving: Vec<TrackLine> = links
+                    .iter()
+                    .filter_map(|l| fit_line(&boxes, l, &any_shape))
+                    .collect();
+                let straight = moving
+                    .iter()
+                    .filter(|l| l.is_straight(t))
+                    .copied()
+                    .collect();
+                (moving, straight)
+            }
+            None => (Vec::new(), Vec::new()),
+        };
+        let telling: Vec<TrackLine> = moving
+            .iter()
+            .filter(|l| l.bend_se_deg < curve.max_se_deg)
+            .copied()
+            .collect();
+        let curved_tracks = bending_the_same_way(&telling, curve.bend_t, curve.bend_deg);
+        let road_curved = curved_tracks >= curve.min_tracks.max(1)
+            && curved_tracks as f64 >= curve.share * telling.len() as f64;
+        RoadTracks {
+            boxes,
+            pairs,
+            links,
+            straight,
+            curved_tracks,
+            road_curved,
+        }
+    }
+}

@@ -572,7 +572,7 @@ fn with_markings(
     else {
         return None;
     };
-    let range = vpcal_geom::aggregate::robust::focal_prior_range_widths(None).map(|r| r * width);
+    let range = vpcal_geom::aggregate::focal::focal_prior_range_widths(None).map(|r| r * width);
     let c = combine(&m, &prior, "markings", range).ok()?;
     let camera = camera_with_focal(&cal, c.focal_px)?;
     Some((camera.vp2, c.focal_px))
