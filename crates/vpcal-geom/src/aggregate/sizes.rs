@@ -163,3 +163,50 @@ pub fn check_horizon(
     }
     Ok(sizes.map(|s| s.slope))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FRAME: [f64; 2] = [1280.0, 720.0];
+    const PP: Point2 = Point2::new(640.0, 360.0);
+
+    /// 60 vehicles standing between 60 and 560 px below the line y = 100, each box
+    /// `size(distance)` pixels wide.
+    fn vehicles(size: impl Fn(f64) -> f64) -> (Vec<Point2>, Vec<BoxPx>) {
+        (0..60)
+            .map(|i| {
+                let d = 60.0 + 500.0 * (i as f64 / 59.0);
+                let (x, foot, s) = (100.0 + 18.0 * i as f64, 100.0 + d, size(d));
+                let b = BoxPx::new(x - s / 2.0, foot - 0.8 * s, x + s / 2.0, foot);
+                (b.center(), b)
+            })
+            .unzip()
+    }
+
+    fn check(horizon_y: f64, size: impl Fn(f64) -> f64) -> Result<Option<f64>, String> {
+        let (centres, boxes) = vehicles(size);
+        let weights = vec![1.0; centres.len()];
+        let horizon =
+            Line::through(Point2::new(0.0, horizon_y), Point2::new(1280.0, horizon_y)).unwrap();
+        check_horizon(&centres, &boxes, &weights, horizon, PP, FRAME, 0.5)
+    }
+
+    #[test]
+    fn vehicles_that_grow_away_from_the_horizon_agree_with_it() {
+        let slope = check(100.0, |d| 0.25 * d).unwrap().unwrap();
+        assert!((slope - 1.0).abs() < 0.05, "{slope}");
+    }
+
+    #[test]
+    fn a_horizon_through_the_traffic_is_refused() {
+        let err = check(500.0, |d| 0.25 * d).unwrap_err();
+        assert!(err.contains("runs through the traffic"), "{err}");
+    }
+
+    #[test]
+    fn vehicles_all_alike_contradict_a_horizon() {
+        let err = check(100.0, |_| 60.0).unwrap_err();
+        assert!(err.contains("sizes contradict"), "{err}");
+    }
+}

@@ -359,3 +359,113 @@ pub(super) fn locate(
         track_residual,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::aggregate::tracks::TrackLine;
+    use crate::aggregate::vehicles::{prepare, vehicle_units, Weighting};
+    use crate::aggregate::VehicleVps;
+    use crate::point::BoxPx;
+
+    const VP1: Point2 = Point2::new(700.0, -150.0);
+    const PP: Point2 = Point2::new(640.0, 360.0);
+
+    fn choice() -> Vp1Choice {
+        Vp1Choice {
+            vp1_threshold_deg: 2.0,
+            min_track_lines: 5,
+            track_threshold_deg: 1.0,
+            track_above_scatter_deg: 3.0,
+            track_residual_ratio: 0.15,
+        }
+    }
+
+    /// `n` vehicles below VP1, each ray towards VP1 turned by `turn_deg(i)`.
+    fn vehicles(n: usize, turn_deg: impl Fn(usize) -> f64) -> Prepared {
+        let pairs: Vec<VehicleVps> = (0..n)
+            .map(|i| {
+                let c = Point2::new(200.0 + 22.0 * i as f64, 300.0 + 9.0 * (i % 7) as f64 * 4.0);
+                let (s, k) = turn_deg(i).to_radians().sin_cos();
+                let d = VP1 - c;
+                let turned = Point2::new(k * d.x - s * d.y, s * d.x + k * d.y);
+                VehicleVps {
+                    box_px: Some(BoxPx::new(c.x - 40.0, c.y - 30.0, c.x + 40.0, c.y + 30.0)),
+                    ..VehicleVps::new(c + turned, Point2::new(5000.0, -150.0), 0.9)
+                }
+            })
+            .collect();
+        let weighting = Weighting {
+            min_score: 0.1,
+            duplicate_iou: 0.7,
+            duplicate_keep: 3.0,
+            min_box_fraction: 0.023,
+        };
+        prepare(&pairs, &vehicle_units(&pairs), &weighting, 720.0)
+    }
+
+    /// `n` straight tracks whose lines meet at `vp`.
+    fn road(n: usize, vp: Point2, curved: bool) -> RoadTracks {
+        let straight = (0..n)
+            .map(|i| {
+                let point = Point2::new(300.0 + 80.0 * i as f64, 600.0);
+                let d = vp - point;
+                TrackLine {
+                    point,
+                    dir: d / d.norm(),
+                    boxes: 20,
+                    travel: 200.0,
+                    rms: 0.5,
+                    bend_t: 0.0,
+                    bend_deg: 0.0,
+                    bend_se_deg: 0.5,
+                }
+            })
+            .collect();
+        RoadTracks {
+            boxes: Vec::new(),
+            pairs: Vec::new(),
+            links: Vec::new(),
+            straight,
+            curved_tracks: if curved { n } else { 0 },
+            road_curved: curved,
+        }
+    }
+
+    fn locate_with(prep: &Prepared, road: &RoadTracks) -> Result<Located, String> {
+        locate(prep, prep, road, PP, 1280.0, &choice(), &mut SplitMix(7))
+    }
+
+    #[test]
+    fn the_network_rays_meet_at_vp1() {
+        let found = locate_with(&vehicles(40, |_| 0.0), &road(0, VP1, false)).unwrap();
+        assert!(!found.lines.from_tracks);
+        assert!((found.vp1 - VP1).norm() < 1.0, "{}", found.vp1);
+        assert_eq!(found.inliers, 40);
+        assert!(found.network_scatter.unwrap() < 0.01);
+    }
+
+    #[test]
+    fn scattered_rays_give_way_to_tracks_that_agree() {
+        // Rays turned by +-6 degrees alternately: VP1 near the truth, the rays 6 degrees off.
+        let prep = vehicles(40, |i| if i % 2 == 0 { 6.0 } else { -6.0 });
+        let elsewhere = VP1 + Point2::new(40.0, 0.0);
+        let found = locate_with(&prep, &road(8, elsewhere, false)).unwrap();
+        assert!(found.lines.from_tracks);
+        assert!((found.vp1 - elsewhere).norm() < 1.0, "{}", found.vp1);
+        assert!(found.track_residual.unwrap() < 0.01);
+        // Too few tracks, or a curved road: the network's rays.
+        for road in [road(4, elsewhere, false), road(8, elsewhere, true)] {
+            let found = locate_with(&prep, &road).unwrap();
+            assert!(!found.lines.from_tracks);
+        }
+    }
+
+    #[test]
+    fn rays_that_agree_on_no_point_give_no_vp1() {
+        // Ten rays, each turned by its own angle, up to 60 degrees.
+        let prep = vehicles(10, |i| (i as f64 * 47.0) % 120.0 - 60.0);
+        let err = locate_with(&prep, &road(0, VP1, false)).unwrap_err();
+        assert!(err.contains("agree on a VP1"), "{err}");
+    }
+}
