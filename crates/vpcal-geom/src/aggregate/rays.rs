@@ -214,10 +214,11 @@ pub const RAY_SYSTEMATIC_PER_SCATTER: f64 = 8.0;
 ///   the truth (median 1.6); with 1° they pulled the edgelets' focal length (0.94-1.00 of the
 ///   truth) to 1.07-1.14 on 7 of 12 calibrations, and 4 of the rays' own intervals held the
 ///   truth; with 2° the fused focal error's median fell from 10 % to 2.5 %.
-/// - The bundled network's per-vehicle VP2 turns towards VP1 on KITTI's real cars (median
-///   +1.7° clean, +2.5° others: `vpcal eval kitti --all`), which would make f short, while on
-///   the renders its rays make f long: its common error changes sign with the domain, so it
-///   is widened, not corrected.
+/// - Per vehicle, where the bundled network's VP2 rays meet the true horizon depends on the
+///   view (docs/accuracy.md §23): on the six speed scenes (VP2 2.9 widths out) at a focal
+///   length whose median is 0.92-1.04 of the truth, on the suite's far-VP2 highways (10-19
+///   widths) at 0.39-0.55; the rays' own fit then trades the horizon's roll for f. A common
+///   error whose sign changes with the view is widened, not corrected.
 pub const RAY_MIN_SCATTER_DEG: f64 = 2.0;
 
 /// The focal length's distribution given the network's VP2 rays and the physical prior:
