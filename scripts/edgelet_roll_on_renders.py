@@ -8,6 +8,8 @@ edgelets of every record within 12 degrees of (a) the network's VP2 ray of the r
 calibration gates them, and (b) the true VP2's direction; edgelets within 4 degrees of the
 direction to VP1 left out, at most 20 a record, strongest first. Prints both rolls against
 the true horizon's angle: whether the edgelets themselves, or the network's gate, turn it.
+Third, (c) the true-VP2 gate keeping only edgelets at least 10 px from every recorded edgelet
+that points at VP1 (the car's edges along it): whether corners turn them.
 
 Usage: scripts/edgelet_roll_on_renders.py SCENE_DIR...   (VPCAL: the binary, default
 target/release/vpcal). Needs numpy and scipy.
@@ -21,6 +23,7 @@ import tempfile
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from scipy.spatial import cKDTree
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 
@@ -50,7 +53,7 @@ def scene(folder, vpcal, tmp):
     roll0 = math.atan2(v2[1] - v1[1], v2[0] - v1[0])
     records = json.load(open(out))
 
-    def gated(towards):
+    def gated(towards, clear_px=0.0):
         points, angles = [], []
         for r in records:
             c = np.array(r["box_center"])
@@ -58,9 +61,13 @@ def scene(folder, vpcal, tmp):
             if q is None:
                 continue
             a2 = math.atan2(q[1] - c[1], q[0] - c[0])
+            along = [e[:2] for e in r.get("edgelets", [])
+                     if abs(line_diff(e[2] - math.atan2(v1[1] - e[1], v1[0] - e[0]))) <= math.radians(4)]
+            tree = cKDTree(np.array(along)) if along and clear_px > 0 else None
             kept = [e for e in r.get("edgelets", [])
                     if abs(line_diff(e[2] - a2)) < math.radians(12)
-                    and abs(line_diff(e[2] - math.atan2(v1[1] - e[1], v1[0] - e[0]))) > math.radians(4)]
+                    and abs(line_diff(e[2] - math.atan2(v1[1] - e[1], v1[0] - e[0]))) > math.radians(4)
+                    and (tree is None or tree.query(e[:2])[0] >= clear_px)]
             for e in sorted(kept, key=lambda e: -e[3])[:20]:
                 points.append(e[:2])
                 angles.append(e[2])
@@ -79,8 +86,10 @@ def scene(folder, vpcal, tmp):
 
     pn, an = gated(network)
     pt, at = gated(lambda r: v2)
+    pc, ac = gated(lambda r: v2, 10.0)
     print(f"{name:22s} roll (f and VP1 true) from edgelets gated by the network's rays {math.degrees(roll_fit(pn, an) - roll0):+5.2f} deg "
-          f"({len(an)}), by the true VP2 {math.degrees(roll_fit(pt, at) - roll0):+5.2f} deg ({len(at)}) off the truth")
+          f"({len(an)}), by the true VP2 {math.degrees(roll_fit(pt, at) - roll0):+5.2f} deg ({len(at)}), "
+          f"away from corners {math.degrees(roll_fit(pc, ac) - roll0):+5.2f} deg ({len(ac)}) off the truth")
 
 
 def main():
