@@ -20,7 +20,7 @@ use super::edgelets as edge;
 use super::focal::{self, FocalSource, Likelihood};
 use super::line_angle_diff;
 use super::vehicles::Prepared;
-use super::vp1::{from_sphere, homogeneous, sphere, vp1_cost, Vp1Lines, SCALE};
+use super::vp1::{from_sphere, homogeneous, sphere, vp1_cost, vp1_of, Vp1Lines, SCALE};
 use crate::point::Point2;
 use crate::solve::nelder_mead;
 
@@ -414,12 +414,10 @@ pub(super) fn fit_camera(
         JOINT_ITERATIONS,
     )
     .x;
-    let sp = sphere([p[0], p[1]]);
-    let vp1 = Point2::new(sp[0] / sp[2] * SCALE, sp[1] / sp[2] * SCALE);
-    if !(sp[2] > 1e-9 && vp1.is_finite()) {
-        return (model.vp1, assumed.fit(w, start), false);
+    match vp1_of(sphere([p[0], p[1]])) {
+        Some(vp1) => (vp1, [p[2], p[3], 0.0], true),
+        None => (model.vp1, assumed.fit(w, start), false),
     }
-    (vp1, [p[2], p[3], 0.0], true)
 }
 
 /// Nelder-Mead budgets of the horizon model (ln f, roll, ray bias: 3 parameters) and of VP1

@@ -482,7 +482,8 @@ pub fn aggregate_with_scene(
     // The vehicles (`super::vehicles`), each pair with its physical vehicle for the
     // bootstraps of the fits and of the edgelets.
     let vehicles = vehicle_units(pairs);
-    let full = prepare(pairs, &vehicles, &opts.weighting(), height);
+    let weighting = opts.weighting();
+    let full = prepare(pairs, &vehicles, &weighting, height);
     // `+ 0.0` turns an empty sum's -0.0 into 0.0 for the messages.
     let effective: f64 = full.weight.iter().sum::<f64>() + 0.0;
     if full.centre.len() < 2 || effective < opts.min_effective_vehicles {
@@ -505,7 +506,7 @@ pub fn aggregate_with_scene(
     };
     let mut rng = SplitMix(opts.seed ^ 0x5EED_CA1B);
     // The tracks (`super::tracks`): VP1 evidence where straight, the road's shape.
-    let (boxes, tracked) = tracked_boxes(pairs, &opts.weighting());
+    let (boxes, tracked) = tracked_boxes(pairs, &weighting);
     let frame = [width, height];
     let road = RoadTracks::of(
         boxes,

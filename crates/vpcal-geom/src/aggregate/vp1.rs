@@ -235,7 +235,7 @@ pub(super) fn locate_vp1_from_network(
         crate::metrics::weighted_median(&xs, w),
         crate::metrics::weighted_median(&ys, w),
     ) {
-        let start = from_sphere([mx / SCALE, my / SCALE, 1.0]);
+        let start = from_sphere(homogeneous(Point2::new(mx, my)));
         let s = t.to_radians().sin();
         if let Some(alt) = fit_vp1(lines.lines(), w, t, rng, Some(start)) {
             let cost = |p: [f64; 3]| vp1_cost(from_sphere(p), lines.lines(), w, s);
