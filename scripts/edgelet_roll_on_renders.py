@@ -14,44 +14,25 @@ that points at VP1 (the car's edges along it): whether corners turn them.
 Usage: scripts/edgelet_roll_on_renders.py SCENE_DIR...   (VPCAL: the binary, default
 target/release/vpcal). Needs numpy and scipy.
 """
-import json
 import math
 import os
-import subprocess
 import sys
-import tempfile
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.spatial import cKDTree
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-
-
-def line_diff(a):
-    return (a + np.pi / 2) % np.pi - np.pi / 2
-
-
-def vp2_on_horizon(vp1, roll, pp, f):
-    h = np.array([math.cos(roll), math.sin(roll)])
-    foot = vp1 + np.dot(pp - vp1, h) * h
-    s = (-f * f - np.dot(vp1 - pp, foot - pp)) / np.dot(vp1 - pp, h)
-    return foot + s * h
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rays_on_renders import each_scene, line_diff, vehicle_records, vp2_on_horizon  # noqa: E402
 
 
 def scene(folder, vpcal, tmp):
-    name = os.path.basename(folder.rstrip("/"))
-    out = os.path.join(tmp, name + ".veh.json")
-    subprocess.run([vpcal, "calibrate", os.path.join(folder, "video.mp4"), "--detections",
-                    os.path.join(folder, "detections.csv"), "--quiet", "-o", os.path.join(tmp, name + ".json"),
-                    "--vehicles", out], capture_output=True)
-    if not os.path.exists(out):
+    name, cam, records = vehicle_records(folder, vpcal, tmp)
+    if not records:
         print(f"{name:22s} no records")
         return
-    cam = json.load(open(os.path.join(folder, "camera.json")))
     v1, v2, pp, f = np.array(cam["vp1"]), np.array(cam["vp2"]), np.array(cam["pp"]), cam["focal_px"]
     roll0 = math.atan2(v2[1] - v1[1], v2[0] - v1[0])
-    records = json.load(open(out))
 
     def gated(towards, clear_px=0.0):
         points, angles = [], []
@@ -92,14 +73,5 @@ def scene(folder, vpcal, tmp):
           f"away from corners {math.degrees(roll_fit(pc, ac) - roll0):+5.2f} deg ({len(ac)}) off the truth")
 
 
-def main():
-    if len(sys.argv) < 2:
-        sys.exit(__doc__)
-    vpcal = os.environ.get("VPCAL", os.path.join(ROOT, "target", "release", "vpcal"))
-    with tempfile.TemporaryDirectory() as tmp:
-        for folder in sys.argv[1:]:
-            scene(folder, vpcal, tmp)
-
-
 if __name__ == "__main__":
-    main()
+    each_scene(scene)

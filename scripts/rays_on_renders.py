@@ -42,17 +42,34 @@ def vp2_on_horizon(vp1, roll, pp, f):
     return foot + s * h
 
 
-def scene(folder, vpcal, tmp):
+def vehicle_records(folder, vpcal, tmp):
+    """The scene's name, its camera.json and the records of `calibrate --vehicles` with its true
+    boxes (empty when the run wrote none)."""
     name = os.path.basename(folder.rstrip("/"))
     out = os.path.join(tmp, name + ".veh.json")
     subprocess.run([vpcal, "calibrate", os.path.join(folder, "video.mp4"), "--detections",
                     os.path.join(folder, "detections.csv"), "--quiet", "-o", os.path.join(tmp, name + ".json"),
                     "--vehicles", out], capture_output=True)
     cam = json.load(open(os.path.join(folder, "camera.json")))
+    return name, cam, (json.load(open(out)) if os.path.exists(out) else [])
+
+
+def each_scene(measure):
+    """Runs `measure(folder, vpcal, tmp)` on every scene folder of the command line."""
+    if len(sys.argv) < 2:
+        sys.exit(sys.modules["__main__"].__doc__)
+    vpcal = os.environ.get("VPCAL", os.path.join(ROOT, "target", "release", "vpcal"))
+    with tempfile.TemporaryDirectory() as tmp:
+        for folder in sys.argv[1:]:
+            measure(folder, vpcal, tmp)
+
+
+def scene(folder, vpcal, tmp):
+    name, cam, records = vehicle_records(folder, vpcal, tmp)
     v1, v2, pp, f = np.array(cam["vp1"]), np.array(cam["vp2"]), np.array(cam["pp"]), cam["focal_px"]
     horizon = np.cross(hom(v1), hom(v2))
     turns, ln_ratio, centres, angles = [], [], [], []
-    for r in json.load(open(out)) if os.path.exists(out) else []:
+    for r in records:
         p2 = r.get("vp2")
         if r.get("vps_copied") or p2 is None or None in p2:
             continue
@@ -87,14 +104,5 @@ def scene(folder, vpcal, tmp):
           f"roll free f x {math.exp(free[0]) / f:5.2f} (roll {math.degrees(free[1] - roll0):+5.2f} deg)")
 
 
-def main():
-    if len(sys.argv) < 2:
-        sys.exit(__doc__)
-    vpcal = os.environ.get("VPCAL", os.path.join(ROOT, "target", "release", "vpcal"))
-    with tempfile.TemporaryDirectory() as tmp:
-        for folder in sys.argv[1:]:
-            scene(folder, vpcal, tmp)
-
-
 if __name__ == "__main__":
-    main()
+    each_scene(scene)
