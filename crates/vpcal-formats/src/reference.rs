@@ -23,6 +23,7 @@ use crate::fs::{read_json, write_json};
 use crate::json::{AccessError, Json};
 use std::path::Path;
 use vpcal_geom::aggregate::edgelets::Edgelet;
+use vpcal_geom::aggregate::verticals::Segment;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::{BoxPx, Point2};
 
@@ -282,58 +283,97 @@ pub fn edgelet_from_row([x, y, angle, strength]: [f64; 4]) -> Edgelet {
     }
 }
 
-/// Format tag of the scene-edgelets file that `vpcal calibrate --scene-edgelets` writes beside
-/// the per-vehicle records: the edgelets of the scene's background, which move VP1 to where the
-/// lines along the road meet, so that `vpcal aggregate --scene-edgelets` finds the same camera.
-pub const SCENE_EDGELETS_FORMAT: &str = "vpcal-scene-edgelets/1";
+/// Format tag of the scene file that `vpcal calibrate --scene-edgelets` writes beside the
+/// per-vehicle records: what the scene's background shows, its edgelets (which move VP1 to
+/// where the lines along the road meet) and its line segments (whose vertical ones measure
+/// the focal length), so that `vpcal aggregate --scene-edgelets` finds the same camera.
+pub const SCENE_EDGELETS_FORMAT: &str = "vpcal-scene-edgelets/2";
 
-/// Write the scene's edgelets (`{"format", "edgelets": [[x, y, angle, strength], ...]}`, frame
-/// pixels and radians) atomically.
+/// The earlier format: edgelets only (read as a scene without segments).
+pub const SCENE_EDGELETS_FORMAT_V1: &str = "vpcal-scene-edgelets/1";
+
+/// What a scene file holds (frame pixels).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SceneRecord {
+    pub edgelets: Vec<Edgelet>,
+    pub segments: Vec<Segment>,
+}
+
+/// Write the scene's edgelets and segments (`{"format", "edgelets": [[x, y, angle,
+/// strength], ...], "segments": [[x0, y0, x1, y1], ...]}`, frame pixels and radians)
+/// atomically.
 ///
 /// # Errors
 /// [`FormatError::Io`] naming the file.
-pub fn write_scene_edgelets(path: &Path, edgelets: &[Edgelet]) -> Result<(), FormatError> {
-    let rows = edgelets
+pub fn write_scene_edgelets(path: &Path, scene: &SceneRecord) -> Result<(), FormatError> {
+    let edgelets = scene
+        .edgelets
         .iter()
         .map(|e| Json::from(&edgelet_row(e)[..]))
+        .collect();
+    let segments = scene
+        .segments
+        .iter()
+        .map(|s| Json::from(&[s.a.x, s.a.y, s.b.x, s.b.y][..]))
         .collect();
     write_json(
         path,
         &Json::Object(vec![
             ("format".into(), Json::String(SCENE_EDGELETS_FORMAT.into())),
-            ("edgelets".into(), Json::Array(rows)),
+            ("edgelets".into(), Json::Array(edgelets)),
+            ("segments".into(), Json::Array(segments)),
         ]),
     )
 }
 
-/// Read a file [`write_scene_edgelets`] wrote.
+/// Read a file [`write_scene_edgelets`] wrote (or one of the earlier format, without
+/// segments).
 ///
 /// # Errors
 /// [`FormatError`] naming the file and, for a malformed one, the field.
-pub fn read_scene_edgelets(path: &Path) -> Result<Vec<Edgelet>, FormatError> {
+pub fn read_scene_edgelets(path: &Path) -> Result<SceneRecord, FormatError> {
     let doc = read_json(path)?;
     let format = doc
         .field("$", "format")
         .and_then(|f| f.as_str("$.format"))
         .map_err(|e| FormatError::field(path, e))?;
-    if format != SCENE_EDGELETS_FORMAT {
+    if format != SCENE_EDGELETS_FORMAT && format != SCENE_EDGELETS_FORMAT_V1 {
         return Err(FormatError::invalid(
             path,
             format!("format `{format}`: expected `{SCENE_EDGELETS_FORMAT}`"),
         ));
     }
-    let rows = doc
-        .field("$", "edgelets")
-        .and_then(|r| r.as_array("$.edgelets"))
-        .map_err(|e| FormatError::field(path, e))?;
-    rows.iter()
+    let rows = |key: &str| {
+        doc.field("$", key)
+            .and_then(|r| r.as_array(&format!("$.{key}")))
+            .map_err(|e| FormatError::field(path, e))
+    };
+    let edgelets = rows("edgelets")?
+        .iter()
         .enumerate()
         .map(|(i, r)| {
             r.as_f64_array::<4>(&format!("$.edgelets[{i}]"))
                 .map(edgelet_from_row)
                 .map_err(|e| FormatError::field(path, e))
         })
-        .collect()
+        .collect::<Result<Vec<_>, _>>()?;
+    let segments = if format == SCENE_EDGELETS_FORMAT_V1 {
+        Vec::new()
+    } else {
+        rows("segments")?
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                r.as_f64_array::<4>(&format!("$.segments[{i}]"))
+                    .map(|[x0, y0, x1, y1]| Segment {
+                        a: Point2::new(x0, y0),
+                        b: Point2::new(x1, y1),
+                    })
+                    .map_err(|e| FormatError::field(path, e))
+            })
+            .collect::<Result<Vec<_>, _>>()?
+    };
+    Ok(SceneRecord { edgelets, segments })
 }
 
 /// The frame size `(width, height)` the items' boxes were measured in, from each box in
@@ -499,14 +539,28 @@ mod tests {
                 strength: 8.5,
             },
         ];
-        write_scene_edgelets(&path, &e).unwrap();
-        assert_eq!(read_scene_edgelets(&path).unwrap(), e);
-        write_scene_edgelets(&path, &[]).unwrap();
-        assert!(read_scene_edgelets(&path).unwrap().is_empty());
+        let scene = SceneRecord {
+            edgelets: e.clone(),
+            segments: vec![Segment {
+                a: Point2::new(10.0, 20.5),
+                b: Point2::new(12.25, 90.0),
+            }],
+        };
+        write_scene_edgelets(&path, &scene).unwrap();
+        assert_eq!(read_scene_edgelets(&path).unwrap(), scene);
+        write_scene_edgelets(&path, &SceneRecord::default()).unwrap();
+        assert_eq!(read_scene_edgelets(&path).unwrap(), SceneRecord::default());
+        // The earlier format: edgelets only.
+        std::fs::write(
+            &path,
+            r#"{"format": "vpcal-scene-edgelets/1", "edgelets": [[1.25, 2.5, -0.125, 30]]}"#,
+        )
+        .unwrap();
+        assert_eq!(read_scene_edgelets(&path).unwrap().edgelets, e[..1]);
         std::fs::write(&path, r#"{"format": "vpcal-tracks/1", "edgelets": []}"#).unwrap();
         let err = read_scene_edgelets(&path).unwrap_err().to_string();
         assert!(
-            err.contains("scene.json") && err.contains("vpcal-scene-edgelets/1"),
+            err.contains("scene.json") && err.contains("vpcal-scene-edgelets/2"),
             "{err}"
         );
         std::fs::write(
@@ -516,6 +570,13 @@ mod tests {
         .unwrap();
         let err = read_scene_edgelets(&path).unwrap_err().to_string();
         assert!(err.contains("edgelets[0]"), "{err}");
+        std::fs::write(
+            &path,
+            r#"{"format": "vpcal-scene-edgelets/2", "edgelets": [], "segments": [[1, 2, 3]]}"#,
+        )
+        .unwrap();
+        let err = read_scene_edgelets(&path).unwrap_err().to_string();
+        assert!(err.contains("segments[0]"), "{err}");
     }
 
     fn item(box_norm: [f64; 4], vp_box: [f64; 4]) -> VpOutItem {

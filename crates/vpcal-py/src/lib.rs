@@ -23,7 +23,7 @@ use vpcal::progress::{FrameProgress, Progress};
 use vpcal::road::{KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
 use vpcal_formats::calib::CalibrationFile;
 use vpcal_formats::json::Json;
-use vpcal_formats::reference::{read_vpout, vpout_from_json, VpOutItem};
+use vpcal_formats::reference::{read_vpout, vpout_from_json, SceneRecord, VpOutItem};
 use vpcal_geom::{BoxPx, Point2};
 use vpcal_video::source::PictureSource;
 use vpcal_video::{Frame, FrameSource, SourceInfo, SourceKind, SourceOptions};
@@ -509,7 +509,7 @@ fn aggregate(
         Some(text) => parse_records(text, origin).map_err(err)?,
     };
     let r = py
-        .detach(|| output::aggregate_records(&items, &[], origin, &s))
+        .detach(|| output::aggregate_records(&items, &SceneRecord::default(), origin, &s))
         .map_err(err)?;
     match r.result {
         Ok(_) => Ok(r.file.to_json_string()),

@@ -60,7 +60,7 @@ impl Default for EdgeletOptions {
 }
 
 /// A normalised 1-D Gaussian (`order` 0) or its derivative (`order` 1), radius `reach sigma`.
-fn kernel(sigma: f32, order: u8, reach: f32) -> Vec<f32> {
+pub(crate) fn kernel(sigma: f32, order: u8, reach: f32) -> Vec<f32> {
     let r = (reach * sigma).ceil().max(1.0) as i32;
     let g: Vec<f32> = (-r..=r)
         .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
@@ -83,7 +83,7 @@ fn kernel(sigma: f32, order: u8, reach: f32) -> Vec<f32> {
 /// `Iterator::sum` does), but written tap by tap over whole rows, so that the inner loops are
 /// element-wise and vectorise: the columns' pass adds rows, the rows' pass shifted copies of
 /// one padded row.
-fn convolve(src: &[f32], w: usize, h: usize, k: &[f32], horizontal: bool) -> Vec<f32> {
+pub(crate) fn convolve(src: &[f32], w: usize, h: usize, k: &[f32], horizontal: bool) -> Vec<f32> {
     let r = k.len() / 2;
     let mut out = vec![-0.0f32; w * h];
     if w == 0 || h == 0 {

@@ -37,6 +37,7 @@ pub mod edges;
 pub mod error;
 pub mod filter;
 pub mod markings;
+pub mod segments;
 pub mod source;
 
 pub use detect::{Detection, Detector};

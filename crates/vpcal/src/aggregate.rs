@@ -5,6 +5,7 @@ use vpcal_formats::calib::Confidence;
 use vpcal_formats::reference::VpOutItem;
 use vpcal_geom::aggregate::edgelets::Edgelet;
 use vpcal_geom::aggregate::reference::{self, ReferenceOptions};
+pub use vpcal_geom::aggregate::robust::Scene;
 use vpcal_geom::aggregate::robust::{self, RobustOptions};
 use vpcal_geom::aggregate::tracks::TrackLine;
 use vpcal_geom::aggregate::{AggregateError, VehicleVps};
@@ -62,6 +63,8 @@ pub enum FocalSource {
     /// The network's VP2 rays, which their points contradict, narrowed the physical prior
     /// to less than half its width (the robust method's `rays_focal_posterior`).
     NetworkRays,
+    /// The scene's vertical lines placed VP3 (the robust method's `verticals`).
+    Verticals,
     /// No evidence fixed it: the robust method's focal prior decided.
     Prior,
     /// The median of the per-vehicle focal lengths (the reference method).
@@ -76,6 +79,7 @@ impl FocalSource {
             FocalSource::Edgelets => "edgelets",
             FocalSource::Network => "network",
             FocalSource::NetworkRays => "network_rays",
+            FocalSource::Verticals => "verticals",
             FocalSource::Prior => "prior",
             FocalSource::PerVehicle => "per_vehicle_median",
             FocalSource::Given => "given",
@@ -365,8 +369,8 @@ fn scene_note(e: &robust::Evidence) -> String {
     }
 }
 
-/// Aggregate with `method`; `image_size` is used by the robust method's priors, `scene` (the
-/// edgelets of the scene's background; may be empty) by the robust methods' VP1.
+/// Aggregate with `method`; `image_size` is used by the robust method's priors, `scene` (what
+/// the scene's background shows; may be empty) by the robust methods' VP1 and focal length.
 ///
 /// # Errors
 /// "Not enough evidence" from the method.
@@ -374,7 +378,7 @@ fn scene_note(e: &robust::Evidence) -> String {
 pub fn aggregate(
     vehicles: &[VehicleVps],
     edgelets: &[Vec<Edgelet>],
-    scene: &[Edgelet],
+    scene: Scene,
     pp: Point2,
     image_size: (u32, u32),
     method: Method,
@@ -483,6 +487,7 @@ pub fn aggregate(
                 Some("edgelets" | "curved_edgelets") => FocalSource::Edgelets,
                 Some("network") => FocalSource::Network,
                 Some("network_rays") => FocalSource::NetworkRays,
+                Some("verticals") => FocalSource::Verticals,
                 _ => FocalSource::Prior,
             };
             let prior_name = match focal_range_px {
@@ -615,6 +620,14 @@ pub fn aggregate(
                 "vp2_rays_only_focal_px": r.confidence.as_ref().map(|c| c.focal_px_data_only),
             });
             if let Some(o) = evidence.as_object_mut() {
+                // The scene's vertical lines (`vpcal_geom::aggregate::verticals`).
+                o.insert("vertical_candidates".into(), e.vertical_candidates.into());
+                o.insert("vertical_supporting".into(), e.vertical_supporting.into());
+                o.insert(
+                    "verticals_focal_px".into(),
+                    serde_json::json!(e.verticals_focal_px),
+                );
+                o.insert("focal_from_verticals".into(), e.focal_from_verticals.into());
                 o.insert(
                     "focal_sources".into(),
                     serde_json::json!(r.focal.carried_by),
@@ -658,6 +671,7 @@ fn cue_words(source: &str) -> &str {
         "curved_edgelets" => "the curved-road fit",
         "network" => "the network's VP2 points and rays",
         "network_rays" => "the network's VP2 rays",
+        "verticals" => "the scene's vertical lines",
         other => other,
     }
 }

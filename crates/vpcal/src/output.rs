@@ -7,13 +7,14 @@ use anyhow::{bail, Context, Result};
 use serde_json::{json, Map, Value};
 use vpcal_formats::bcs::{write_system, SystemCalibration, SystemCar, SystemFile};
 use vpcal_formats::calib::{CalibrationFile, Dropped, InputSummary};
-use vpcal_formats::reference::{infer_image_size, write_scene_edgelets, write_vpout, VpOutItem};
-use vpcal_geom::aggregate::edgelets::Edgelet;
+use vpcal_formats::reference::{
+    infer_image_size, write_scene_edgelets, write_vpout, SceneRecord, VpOutItem,
+};
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_video::{SourceKind, Start};
 
-use crate::aggregate::{aggregate, check_focal_settings, edgelets_of, Aggregated, Method};
+use crate::aggregate::{aggregate, check_focal_settings, edgelets_of, Aggregated, Method, Scene};
 use crate::pipeline::{PipelineConfig, PipelineOutput, PrincipalPoint};
 use crate::road::{KnownDistance, RoadCamera, RoadMeasure, ScaleInput};
 use crate::tracks::{build_tracks, summary, TrackSettings, VehicleTrack};
@@ -361,15 +362,15 @@ pub struct RecordsCalibration {
 }
 
 /// Aggregate per-vehicle records `items` (a VPout file's, named `origin` in the file and in
-/// errors) and the scene's edgelets (`scene`, from `calibrate --scene-edgelets`; may be empty)
-/// into a calibration file, as `vpcal aggregate` does.
+/// errors) and what the scene's background shows (`scene`, from `calibrate
+/// --scene-edgelets`; may be empty) into a calibration file, as `vpcal aggregate` does.
 ///
 /// # Errors
 /// A frame size that neither the settings nor the records' boxes give. Too little evidence
 /// is not an error here: the file then says why (`result` holds the reason).
 pub fn aggregate_records(
     items: &[VpOutItem],
-    scene: &[Edgelet],
+    scene: &SceneRecord,
     origin: &str,
     s: &RecordSettings,
 ) -> Result<RecordsCalibration> {
@@ -404,7 +405,10 @@ pub fn aggregate_records(
     let result = aggregate(
         &vehicles,
         &edgelets_of(items),
-        scene,
+        Scene {
+            edgelets: &scene.edgelets,
+            segments: &scene.segments,
+        },
         pp,
         (width, height),
         s.method,
@@ -1007,7 +1011,13 @@ pub fn write_vehicles(path: &Path, out: &PipelineOutput) -> Result<()> {
 /// # Errors
 /// The file cannot be written.
 pub fn write_scene(path: &Path, out: &PipelineOutput) -> Result<()> {
-    write_scene_edgelets(path, &out.scene_edgelets)?;
+    write_scene_edgelets(
+        path,
+        &SceneRecord {
+            edgelets: out.scene_edgelets.clone(),
+            segments: out.scene_segments.clone(),
+        },
+    )?;
     Ok(())
 }
 

@@ -17,6 +17,7 @@ use anyhow::{bail, Context, Result};
 use image::RgbImage;
 use vpcal_formats::reference::{edgelet_row, VpOutItem};
 use vpcal_geom::aggregate::edgelets::{near_rays, Edgelet, EdgeletFitOptions};
+use vpcal_geom::aggregate::verticals::Segment;
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::heatmap::VpPrediction;
@@ -27,9 +28,10 @@ use vpcal_video::crop::{integer_box, CropFilter, CropResizer};
 use vpcal_video::detect::Detection;
 use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
 use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
+use vpcal_video::segments::{line_segments, SegmentOptions};
 use vpcal_video::{Detector, Frame, FrameSource, SourceInfo, SourceKind, SourceOptions};
 
-use crate::aggregate::{aggregate, Aggregated, Method};
+use crate::aggregate::{aggregate, Aggregated, Method, Scene};
 use crate::crop_plan::{CropPlanSettings, CropPlanner};
 pub use crate::detector::is_stills;
 use crate::detector::{open_detector, DetectorSettings};
@@ -448,6 +450,9 @@ pub struct PipelineOutput {
     /// `vpcal_video::background`): the lines along the road that place VP1. Empty with
     /// `--no-edgelets`.
     pub scene_edgelets: Vec<Edgelet>,
+    /// The straight line segments of the scene's background (`vpcal_video::segments`): its
+    /// vertical lines measure the focal length. Empty with `--no-edgelets`.
+    pub scene_segments: Vec<Segment>,
     /// The scene's background: the median of frames sampled over the input (grey levels),
     /// where its road markings are found. `None` with `--no-edgelets`.
     pub background: Option<image::GrayImage>,
@@ -1128,6 +1133,9 @@ pub fn run_pipeline_on(
     let scene_edgelets = background
         .as_ref()
         .map_or_else(Vec::new, |bg| scene_edgelets(bg, &scene_edgelet_options()));
+    let scene_segments = background
+        .as_ref()
+        .map_or_else(Vec::new, |bg| line_segments(bg, &SegmentOptions::default()));
     stats.stages.background += t.elapsed().as_secs_f64();
     stats.seconds = t0.elapsed().as_secs_f64();
     Ok(PipelineOutput {
@@ -1139,6 +1147,7 @@ pub fn run_pipeline_on(
         stats,
         picture: last_frame,
         scene_edgelets,
+        scene_segments,
         background,
         warnings,
     })
@@ -1208,7 +1217,10 @@ pub fn calibrate(
     let agg = aggregate(
         &vehicles,
         &edgelets,
-        &out.scene_edgelets,
+        Scene {
+            edgelets: &out.scene_edgelets,
+            segments: &out.scene_segments,
+        },
         pp,
         (out.info.width, out.info.height),
         config.method,

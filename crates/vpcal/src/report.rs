@@ -688,6 +688,7 @@ fn focal_source_words(source: &str) -> &'static str {
         "edgelets" => "measured: edges across the vehicles (edgelets) placed VP2",
         "network" => "measured: the network's VP2 points and rays agreed",
         "network_rays" => "measured: the network's VP2 rays, weighed against the plausible range",
+        "verticals" => "measured: the scene's vertical lines (poles, posts, walls) placed VP3",
         "prior" => "ASSUMED: the evidence weighed less than the plausible range; its middle",
         "given" => "given by the user (--focal)",
         "per_vehicle_median" => "the median of the per-vehicle focal lengths (reference method)",

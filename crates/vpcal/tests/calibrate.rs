@@ -795,13 +795,14 @@ fn demo_renders_calibrates_and_compares_with_the_truth() {
     ]);
     assert_eq!(r.status.code(), Some(0), "{}", text(&r));
     assert!(out.join("dataset/demo_highway_s3/video.mp4").is_file());
-    // Bounds around what this scene gave when the test was written (focal +6.2 %, assumed;
-    // horizon +2.37°, ratio error 4.17 % mean): a broken calibration fails them.
+    // Bounds around what this scene gave when the test was written (focal +10.7 % from the
+    // scene's poles; horizon +2.60°, ratio error 4.27 % mean): a broken calibration fails
+    // them.
     let doc = read_calibration(&out.join("calib.json"));
     let demo = doc.demo.as_ref().unwrap();
-    // This VP2 is too far for any evidence to place it: the focal length is the prior's, and
-    // said so, with an interval that holds the truth.
-    assert_eq!(doc.focal_source.as_deref(), Some("prior"));
+    // This VP2 is too far for the vehicles' evidence to place it; the poles beside the road
+    // place VP3, with an interval that holds the truth.
+    assert_eq!(doc.focal_source.as_deref(), Some("verticals"));
     let [lo, hi] = doc.focal_interval_px.unwrap();
     assert!(
         lo < demo.true_focal_px && demo.true_focal_px < hi,

@@ -557,6 +557,7 @@ fn run_output(records: Vec<VehicleRecord>, frames: u64) -> PipelineOutput {
         },
         picture: Some(RgbImage::new(W, H)),
         scene_edgelets: Vec::new(),
+        scene_segments: Vec::new(),
         background: None,
         warnings: Vec::new(),
     }

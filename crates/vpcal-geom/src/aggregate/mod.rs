@@ -18,6 +18,7 @@ pub mod sizes;
 pub mod tracks;
 pub mod vehicle_vp;
 pub mod vehicles;
+pub mod verticals;
 mod vp1;
 
 use crate::point::{BoxPx, Point2};

@@ -47,20 +47,24 @@
 //! 6. **The scene's lines** ([`super::scene_lines`]): on a straight road, VP1 moves to where
 //!    the background's lines along the road meet while the vehicles' VP1 lines still agree
 //!    (`scene_max_extra_deg`).
-//! 7. **The focal posterior** ([`super::focal`]): the prior (uniform in `ln f` over 15-90°
+//! 7. **The scene's vertical lines** ([`super::verticals`]): where the background's line
+//!    segments are given, VP3 (where poles and posts meet) with VP1 and the horizon measures
+//!    `f` without VP2.
+//! 8. **The focal posterior** ([`super::focal`]): the prior (uniform in `ln f` over 15-90°
 //!    views, soft edges, or the user's range) times the cues whose model holds: on a straight
 //!    road the edgelets, the trusted rays' fit or the untrusted rays' likelihood; on a curved
-//!    road the curved-road fit only; none where the edges across the vehicles are parallel
-//!    in the image ([`PARALLEL_EDGES_VP2_WIDTHS`]). `f` is the posterior's median where the
+//!    road the curved-road fit only; none of these where the edges across the vehicles are
+//!    parallel in the image ([`PARALLEL_EDGES_VP2_WIDTHS`]); the verticals wherever the
+//!    horizon is placed (not on a curved road without the curved-road fit). `f` is the posterior's median where the
 //!    cues carry at least the prior's information, else the prior's middle; the roll and ray
 //!    bias are refitted with `f` held where no edgelets set the roll.
-//! 8. **Confidence** (`bootstrap`): Poisson(1) counts per vehicle refit VP1 and (f, θ, δ);
+//! 9. **Confidence** (`bootstrap`): Poisson(1) counts per vehicle refit VP1 and (f, θ, δ);
 //!    the 16th-84th percentiles of `f` (or those of the edgelet fit that carried it) and the
 //!    spread of the horizon angle are reported.
-//! 9. **The horizon against the vehicles** ([`super::sizes`]): more than `max_above_horizon`
-//!    of the vehicle weight above the horizon, or box sizes that do not grow away from it
-//!    (near-top-down views, where the VPs are near infinity and the focal length cannot be
-//!    observed), is not enough evidence.
+//! 10. **The horizon against the vehicles** ([`super::sizes`]): more than `max_above_horizon`
+//!     of the vehicle weight above the horizon, or box sizes that do not grow away from it
+//!     (near-top-down views, where the VPs are near infinity and the focal length cannot be
+//!     observed), is not enough evidence.
 //!
 //! Each stage writes its own fields of [`Evidence`]. On the 12 BrnoCompSpeed training videos
 //! this is measured against the reference rule by `vpcal eval vpout` (ARCHITECTURE.md has the
@@ -78,6 +82,7 @@ use super::scene_lines::{self, SceneLineOptions, SceneVp1};
 use super::sizes;
 use super::tracks::{self, CurveTest, RoadTracks, TrackLine, TrackOptions};
 use super::vehicles::{prepare, tracked_boxes, vehicle_units, Prepared, Weighting};
+use super::verticals::{self, Segment, VerticalOptions};
 use super::vp1::{self, homogeneous, Vp1Choice, Vp1Lines};
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
@@ -191,6 +196,10 @@ pub struct RobustOptions {
     /// direction raised it by 8.4°.
     #[serde(default = "default_scene_max_extra_deg")]
     pub scene_max_extra_deg: f64,
+    /// Measure the focal length from the scene's vertical lines ([`verticals`]) when its line
+    /// segments are given ([`Scene::segments`]); `None`: never.
+    #[serde(default)]
+    pub verticals: Option<VerticalOptions>,
 }
 
 fn default_scene_max_extra_deg() -> f64 {
@@ -232,6 +241,7 @@ impl Default for RobustOptions {
             edgelets: Some(EdgeletFitOptions::default()),
             scene_lines: Some(SceneLineOptions::default()),
             scene_max_extra_deg: default_scene_max_extra_deg(),
+            verticals: Some(VerticalOptions::default()),
         }
     }
 }
@@ -373,6 +383,17 @@ pub struct Evidence {
     /// Whether the rays carried the focal length in its posterior (`super::focal`).
     #[serde(default)]
     pub focal_from_rays: bool,
+    /// The scene's vertical lines ([`verticals`]): the segments that could be verticals and
+    /// those that point at the fit's VP3 (0 without segments), the focal length they give
+    /// (pixels; `None` where not identified), and whether they carried it in its posterior.
+    #[serde(default)]
+    pub vertical_candidates: usize,
+    #[serde(default)]
+    pub vertical_supporting: usize,
+    #[serde(default)]
+    pub verticals_focal_px: Option<f64>,
+    #[serde(default)]
+    pub focal_from_verticals: bool,
 }
 
 /// The spread of the estimate under resampling of the vehicles.
@@ -447,13 +468,24 @@ pub fn aggregate_with_edgelets(
     pp: Point2,
     opts: &RobustOptions,
 ) -> Result<RobustResult, AggregateError> {
-    aggregate_with_scene(pairs, edgelets, &[], pp, opts)
+    aggregate_with_scene(pairs, edgelets, Scene::default(), pp, opts)
 }
 
-/// [`aggregate_with_edgelets`], with the edgelets of the scene's background (`scene`, frame
-/// pixels; empty: none): with `opts.scene_lines` set and a straight road, VP1 moves to where
-/// the scene's lines along the road meet ([`scene_lines`]) while the vehicles' VP1 evidence
-/// agrees (`opts.scene_max_extra_deg`).
+/// What the scene's background picture shows (frame pixels; empty: nothing).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Scene<'a> {
+    /// Its edgelets: the lines along the road move VP1 ([`scene_lines`]).
+    pub edgelets: &'a [Edgelet],
+    /// Its straight line segments: the vertical ones measure the focal length
+    /// ([`verticals`]).
+    pub segments: &'a [Segment],
+}
+
+/// [`aggregate_with_edgelets`], with what the scene's background shows ([`Scene`]): with
+/// `opts.scene_lines` set and a straight road, VP1 moves to where the scene's lines along the
+/// road meet ([`scene_lines`]) while the vehicles' VP1 evidence agrees
+/// (`opts.scene_max_extra_deg`); with `opts.verticals` set, its vertical lines measure the
+/// focal length ([`verticals`]).
 ///
 /// # Errors
 /// As [`aggregate`].
@@ -463,10 +495,11 @@ pub fn aggregate_with_edgelets(
 pub fn aggregate_with_scene(
     pairs: &[VehicleVps],
     edgelets: &[Vec<Edgelet>],
-    scene: &[Edgelet],
+    scene_view: Scene,
     pp: Point2,
     opts: &RobustOptions,
 ) -> Result<RobustResult, AggregateError> {
+    let scene = scene_view.edgelets;
     assert!(
         edgelets.is_empty() || edgelets.len() == pairs.len(),
         "{} edgelet lists for {} pairs",
@@ -599,15 +632,32 @@ pub fn aggregate_with_scene(
     // edges across the vehicles not where those edges are parallel in the image (a view
     // straight down, where f cannot be observed).
     let trusted = rays_trusted.then(|| trusted_rays(x[0].exp(), samples.as_ref()));
+    // The scene's vertical lines need only the horizon: VP1 on it and its roll.
+    let horizon_placed = curved_fit.is_some() || !road.road_curved;
+    let vertical_fit = opts
+        .verticals
+        .as_ref()
+        .filter(|_| horizon_placed && !scene_view.segments.is_empty())
+        .and_then(|vo| {
+            let support = focal::support(range_px);
+            verticals::fit(scene_view.segments, vp1, pp, x[1], support, vo, opts.seed)
+        });
+    let vertical = vertical_fit.as_ref().map(|v| v as &dyn FocalSource);
     let sources: Vec<&dyn FocalSource> = match &curved_fit {
-        Some(c) => vec![c],
+        Some(c) => [Some(c as &dyn FocalSource), vertical]
+            .into_iter()
+            .flatten()
+            .collect(),
         None if !road.road_curved && !edges_parallel => {
             let edges = usable.as_ref().map(|e| e as &dyn FocalSource);
             let trusted = trusted.as_ref().map(|t| t as &dyn FocalSource);
             let rays = rays.as_ref().map(|r| r as &dyn FocalSource);
-            [edges, trusted, rays].into_iter().flatten().collect()
+            [edges, trusted, rays, vertical]
+                .into_iter()
+                .flatten()
+                .collect()
         }
-        None => Vec::new(),
+        None => vertical.into_iter().collect(),
     };
     let focal = focal::fuse(range_px, &focal::cues_of(&sources))
         .ok_or_else(|| not_enough(format!("invalid focal range {range_px:?} px")))?;
@@ -619,6 +669,12 @@ pub fn aggregate_with_scene(
         evidence.rays_posterior_px = r.posterior;
     }
     evidence.focal_from_rays = carried("network_rays");
+    if let Some(v) = &vertical_fit {
+        evidence.vertical_candidates = v.candidates;
+        evidence.vertical_supporting = v.supporting;
+        evidence.verticals_focal_px = v.identified.then_some(v.focal_px);
+    }
+    evidence.focal_from_verticals = carried("verticals");
     if let Some(e) = edge_fit {
         evidence.edgelets = e.edgelets;
         evidence.edgelet_vehicles = e.vehicles;

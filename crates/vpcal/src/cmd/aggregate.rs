@@ -8,7 +8,7 @@ use vpcal::output::{
     aggregate_records, check_destination, write_bcs_system, RecordSettings, RecordsCalibration,
 };
 use vpcal::pipeline::PrincipalPoint;
-use vpcal_formats::reference::{read_scene_edgelets, read_vpout};
+use vpcal_formats::reference::{read_scene_edgelets, read_vpout, SceneRecord};
 
 use super::{Exit, UsageError};
 
@@ -91,7 +91,7 @@ pub fn run(args: Args) -> Result<Exit> {
     let items = read_vpout(&args.vpout)?;
     let scene = match &args.scene_edgelets {
         Some(path) => read_scene_edgelets(path)?,
-        None => Vec::new(),
+        None => SceneRecord::default(),
     };
     let settings = RecordSettings {
         method: args.method,

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use vpcal::aggregate::{aggregate, edgelets_of, Method};
+use vpcal::aggregate::{aggregate, edgelets_of, Method, Scene};
 use vpcal_formats::bcp::read_gt_pairs;
 use vpcal_formats::bcs::{
     self, read_gt, read_system, write_system, GtData, SystemCalibration, SystemFile,
@@ -24,14 +24,14 @@ use vpcal_formats::bcs_speed::{
     evaluate_video, pool as pool_speed, read_camera_truth, CameraTruth, PooledSpeed, Road,
     SpeedError, SpeedMode, VideoSpeed,
 };
-use vpcal_formats::reference::read_vpout;
-use vpcal_geom::aggregate::edgelets::Edgelet;
+use vpcal_formats::reference::{read_vpout, SceneRecord};
 use vpcal_geom::aggregate::VehicleVps;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::{
     optimal_scale, ratio_errors, scaled_distance_errors, summarize, RoadMeasurement, Summary,
 };
 use vpcal_video::background::{keep_inside, scene_edgelet_options, scene_edgelets};
+use vpcal_video::segments::{line_segments, SegmentOptions};
 
 /// Evaluate calibrations against BrnoCompSpeed or BrnoCarPark ground truth.
 #[derive(Debug, clap::Subcommand)]
@@ -128,6 +128,12 @@ pub struct VpoutArgs {
     /// calibration's own (`vpcal::road_focal::combine`).
     #[arg(long, value_name = "PERIOD,LANE")]
     pub markings: Option<vpcal::markings::MarkingStandard>,
+    /// The reference cameras (FILE's cameras[<video>] {vp1, vp2, pp}, the layout of
+    /// camera_truth.json): each calibration's focal length is then compared with theirs, and
+    /// each variant's summary says the median focal error, how many 68 % intervals hold the
+    /// reference and their median width (long end over short).
+    #[arg(long, value_name = "FILE")]
+    pub camera_truth: Option<PathBuf>,
     /// Print machine-readable JSON instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -552,15 +558,15 @@ fn print_row(name: &str, ratio: Option<&Summary>, distance: Option<&Summary>, v:
 
 /// The focal length the lane lines (`bars` of the screen) give under `standard` on the camera
 /// of `vp1`, `vp2` and `pp` (frames `width` wide), combined with the aggregation's focal
-/// length (`prior`: its value, interval and source): the camera's new VP2 and focal length,
-/// or `None` where the markings measure nothing.
+/// length (`prior`: its value, interval and source): the camera's new VP2, focal length and
+/// its interval, or `None` where the markings measure nothing.
 fn with_markings(
     bars: &[vpcal_video::markings::Bar],
     standard: &vpcal::markings::MarkingStandard,
     (vp1, vp2, pp): (vpcal_geom::Point2, vpcal_geom::Point2, vpcal_geom::Point2),
     width: f64,
     prior: vpcal::road_focal::PriorFocal,
-) -> Option<(vpcal_geom::Point2, f64)> {
+) -> Option<(vpcal_geom::Point2, f64, Option<[f64; 2]>)> {
     use vpcal::road_focal::{
         camera_with_focal, combine, fit_focal_from_lengths, CameraSpread, LengthFocalFit,
     };
@@ -575,7 +581,7 @@ fn with_markings(
     let range = vpcal_geom::aggregate::focal::focal_prior_range_widths(None).map(|r| r * width);
     let c = combine(&m, &prior, "markings", range).ok()?;
     let camera = camera_with_focal(&cal, c.focal_px)?;
-    Some((camera.vp2, c.focal_px))
+    Some((camera.vp2, c.focal_px, Some(c.interval_px)))
 }
 
 /// The bright bars of a BrnoCompSpeed video's `screen.png` inside its `video_mask.png`
@@ -609,15 +615,18 @@ fn video_bars(dir: &Path) -> Result<Vec<vpcal_video::markings::Bar>> {
     ))
 }
 
-/// The edgelets of a BrnoCompSpeed video's `screen.png` (one frame of the video), without
-/// those where its `video_mask.png` is black; none without a screen.
+/// What a BrnoCompSpeed video's `screen.png` (one frame of the video) shows: its edgelets
+/// without those where its `video_mask.png` is black (the mask keeps the road, whose lines
+/// place VP1), and its line segments over the whole frame (as `calibrate` sees it: the
+/// mask would leave out the poles and posts beside the road, the vertical lines that
+/// measure the focal length); nothing without a screen.
 ///
 /// # Errors
 /// A screen or mask that cannot be read, or a mask of another size.
-fn video_scene(dir: &Path) -> Result<Vec<Edgelet>> {
+fn video_scene(dir: &Path) -> Result<SceneRecord> {
     let screen = dir.join("screen.png");
     if !screen.exists() {
-        return Ok(Vec::new());
+        return Ok(SceneRecord::default());
     }
     // The grey `calibrate` takes from a video's frames.
     let image = vpcal_video::edges::grey_opencv(
@@ -643,7 +652,10 @@ fn video_scene(dir: &Path) -> Result<Vec<Edgelet>> {
         }
         keep_inside(&mut edgelets, &mask);
     }
-    Ok(edgelets)
+    Ok(SceneRecord {
+        edgelets,
+        segments: line_segments(&image, &SegmentOptions::default()),
+    })
 }
 
 /// One variant (VPout file stem) and method, over all videos.
@@ -655,6 +667,58 @@ pub struct VpoutResult {
     pub result: SystemResult,
     /// Focal length per video, pixels (`None` when the method gave no calibration).
     pub focal_px: Vec<Option<f64>>,
+    /// Its 68 % interval per video, pixels.
+    pub focal_interval_px: Vec<Option<[f64; 2]>>,
+    /// With `--camera-truth`: the reference camera's focal length per video (`None` where
+    /// the file has no camera for it), and the summary against them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub focal_truth_px: Option<Vec<Option<f64>>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub focal_summary: Option<FocalSummary>,
+}
+
+/// A variant's focal lengths against the reference cameras.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FocalSummary {
+    /// Videos with both a calibration and a reference camera.
+    pub videos: usize,
+    /// Median of |focal / reference - 1|, percent.
+    pub median_abs_error_pct: f64,
+    /// Videos whose 68 % interval holds the reference focal length.
+    pub covered: usize,
+    /// Median of the intervals' long end over their short end.
+    pub median_hi_lo: f64,
+}
+
+/// The focal lengths `focal` (with their `interval`s) against the references `truth`.
+fn focal_summary(
+    focal: &[Option<f64>],
+    interval: &[Option<[f64; 2]>],
+    truth: &[Option<f64>],
+) -> Option<FocalSummary> {
+    let (mut errors, mut ratios, mut covered) = (Vec::new(), Vec::new(), 0);
+    for ((f, iv), t) in focal.iter().zip(interval).zip(truth) {
+        let (Some(f), Some(t)) = (f, t) else {
+            continue;
+        };
+        errors.push(100.0 * (f / t - 1.0).abs());
+        if let Some([lo, hi]) = iv {
+            ratios.push(hi / lo);
+            covered += usize::from(*lo <= *t && *t <= *hi);
+        }
+    }
+    Some(FocalSummary {
+        videos: errors.len(),
+        median_abs_error_pct: vpcal_geom::metrics::median(&errors)?,
+        covered,
+        median_hi_lo: vpcal_geom::metrics::median(&ratios).unwrap_or(f64::NAN),
+    })
+}
+
+/// The focal length of a reference camera: `sqrt(-(vp1 - pp)·(vp2 - pp))`.
+fn truth_focal(c: &CameraTruth) -> Option<f64> {
+    let f2 = -(c.vp1 - c.pp).dot(c.vp2 - c.pp);
+    (f2 > 0.0).then(|| f2.sqrt())
 }
 
 /// Aggregate every VPout file with every method and evaluate it; the library entry point of
@@ -664,6 +728,11 @@ pub struct VpoutResult {
 /// Unreadable directories, ground truth or VPout files; no video with both.
 pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
     let videos = split_videos(&args.dataset, args.split)?;
+    let truth = args
+        .camera_truth
+        .as_deref()
+        .map(read_camera_truth)
+        .transpose()?;
     // (video, measurements, [(variant, file)], the scene's edgelets: empty without a screen,
     // the screen's bright bars with --markings)
     let mut work = Vec::new();
@@ -689,7 +758,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
         if !files.is_empty() {
             let gt = read_gt(dir)?;
             let scene = if args.no_scene {
-                Vec::new()
+                SceneRecord::default()
             } else {
                 video_scene(dir)?
             };
@@ -722,8 +791,15 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             })
         })
         .collect();
-    /// One scored job: video index, VPout file stem, method, its row and focal length.
-    type Outcome = (usize, String, Method, VideoResult, Option<f64>);
+    /// One scored job: video index, VPout file stem, method, its row, focal length and its
+    /// interval.
+    type Outcome = (
+        usize,
+        String,
+        Method,
+        VideoResult,
+        Option<(f64, Option<[f64; 2]>)>,
+    );
     let outcomes: Vec<Result<Outcome>> = jobs
         .par_iter()
         .map(|(vi, stem, path, method)| {
@@ -734,7 +810,10 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             let agg = aggregate(
                 &vehicles,
                 &edgelets_of(&items),
-                scene,
+                Scene {
+                    edgelets: &scene.edgelets,
+                    segments: &scene.segments,
+                },
                 pp,
                 args.image_size,
                 *method,
@@ -753,7 +832,8 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                         let width = f64::from(args.image_size.0);
                         with_markings(bars, standard, (a.vp1, a.vp2, pp), width, prior)
                     });
-                    let (vp2, focal_px) = marked.unwrap_or((a.vp2, a.focal_px));
+                    let (vp2, focal_px, interval) =
+                        marked.unwrap_or((a.vp2, a.focal_px, a.focal_interval_px));
                     let system = SystemFile::new(SystemCalibration {
                         vp1: a.vp1,
                         vp2,
@@ -771,7 +851,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                     }
                     (
                         evaluate_one(video, Some(&system), measurements, &ScaleMode::FromFile),
-                        Some(focal_px),
+                        Some((focal_px, interval)),
                     )
                 }
                 Err(e) => {
@@ -793,6 +873,8 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
         for method in &args.methods {
             let mut videos_rows = Vec::new();
             let mut focals = Vec::new();
+            let mut intervals = Vec::new();
+            let mut truths = Vec::new();
             for (vi, (video, measurements, _, _, _)) in work.iter().enumerate() {
                 match rows
                     .iter()
@@ -800,7 +882,8 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                 {
                     Some(r) => {
                         videos_rows.push(r.3.clone());
-                        focals.push(r.4);
+                        focals.push(r.4.map(|f| f.0));
+                        intervals.push(r.4.and_then(|f| f.1));
                     }
                     None => {
                         videos_rows.push(evaluate_one(
@@ -810,14 +893,28 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                             &ScaleMode::FromFile,
                         ));
                         focals.push(None);
+                        intervals.push(None);
                     }
                 }
+                truths.push(
+                    truth
+                        .as_ref()
+                        .and_then(|t| t.get(video))
+                        .and_then(truth_focal),
+                );
             }
+            let focal_summary = truth
+                .is_some()
+                .then(|| focal_summary(&focals, &intervals, &truths))
+                .flatten();
             out.push(VpoutResult {
                 variant: variant.clone(),
                 method: method.name(),
                 result: pool(format!("{variant}_{}", method.name()), videos_rows),
                 focal_px: focals,
+                focal_interval_px: intervals,
+                focal_truth_px: truth.is_some().then_some(truths),
+                focal_summary,
             });
         }
     }
@@ -871,6 +968,24 @@ fn run_vpout(args: &VpoutArgs) -> Result<()> {
             pooled.push_str(&format!(" {cell:>20}"));
         }
         println!("{pooled}");
+        if rows.iter().any(|r| r.focal_summary.is_some()) {
+            let mut focal = format!("{:<18}", "focal vs truth");
+            for r in &rows {
+                let cell = match &r.focal_summary {
+                    Some(f) => format!(
+                        "{:.1} % {}/{} x{:.2}",
+                        f.median_abs_error_pct, f.covered, f.videos, f.median_hi_lo
+                    ),
+                    None => "-".into(),
+                };
+                focal.push_str(&format!(" {cell:>20}"));
+            }
+            println!("{focal}");
+            println!(
+                "  (median |focal error|, 68 % intervals holding the reference / videos, their \
+                 median long/short end)"
+            );
+        }
     }
     Ok(())
 }
