@@ -1006,7 +1006,7 @@ pub fn write_vehicles(path: &Path, out: &PipelineOutput) -> Result<()> {
     Ok(())
 }
 
-/// Write the scene's edgelets of a run (what `--scene-edgelets` writes).
+/// Write the scene's edgelets and line segments of a run (what `--scene-edgelets` writes).
 ///
 /// # Errors
 /// The file cannot be written.

@@ -24,8 +24,9 @@ a calibration."
 pub struct Args {
     /// Per-vehicle VP records: the reference's VPout_*.json, or `vpcal calibrate --vehicles`.
     pub vpout: PathBuf,
-    /// The scene's edgelets from `vpcal calibrate --scene-edgelets` (the lines along the road
-    /// that place VP1); without them VP1 comes from the records alone.
+    /// The scene's edgelets and line segments from `vpcal calibrate --scene-edgelets` (the
+    /// lines along the road that place VP1, the vertical ones that measure the focal length);
+    /// without them VP1 and the focal length come from the records alone.
     #[arg(long, value_name = "FILE")]
     pub scene_edgelets: Option<PathBuf>,
     /// Write the calibration file here (the same file `vpcal calibrate -o` writes).

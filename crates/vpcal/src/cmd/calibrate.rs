@@ -39,9 +39,10 @@ pub struct Args {
     /// Also write the per-vehicle records (deep_vp's `VPout` JSON; non-finite numbers as null).
     #[arg(long, value_name = "FILE")]
     pub vehicles: Option<PathBuf>,
-    /// Also write the edgelets of the scene's background (the median of frames sampled over
-    /// the input), which move VP1 to where the lines along the road meet: with the
-    /// `--vehicles` file, `vpcal aggregate --scene-edgelets FILE` finds the same camera.
+    /// Also write the edgelets and line segments of the scene's background (the median of
+    /// frames sampled over the input), which move VP1 to where the lines along the road meet
+    /// and measure the focal length where vertical lines meet: with the `--vehicles` file,
+    /// `vpcal aggregate --scene-edgelets FILE` finds the same camera.
     #[arg(long, value_name = "FILE")]
     pub scene_edgelets: Option<PathBuf>,
     /// Also write the scene's background (the median of frames sampled over the input: the
