@@ -119,8 +119,9 @@ pub struct VpoutArgs {
     #[arg(long)]
     pub write_results: Option<PathBuf>,
     /// Do not take the scene's lines from each video's `screen.png` (a frame of the video in
-    /// the dataset folder, `video_mask.png` leaving out what is not the scene): VP1 then
-    /// comes from the VPout records alone.
+    /// the dataset folder): neither its lines along the road (inside `video_mask.png`) nor
+    /// its vertical lines (the whole frame); VP1 and the focal length then come from the
+    /// VPout records alone.
     #[arg(long)]
     pub no_scene: bool,
     /// The roads' marking standard, PERIOD,LANE in metres (as `calibrate --markings`): the
