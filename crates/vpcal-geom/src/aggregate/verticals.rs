@@ -137,28 +137,42 @@ struct Candidate {
     sd: f64,
 }
 
-/// The direction (not normalised) from `p` to VP3 for VP1, pp, `f²` and the horizon's unit
-/// direction `h`: `d²·(pp − p) + f²·(pp − foot)`, `foot` the principal point's foot on the
-/// horizon and `d` its distance, which is VP3 − p times `d²` (finite also where the horizon
-/// passes through pp and the verticals are parallel).
-fn towards_vp3(p: Point2, pp: Point2, foot: Point2, f2: f64) -> Point2 {
-    let n = pp - foot;
-    (pp - p) * n.dot(n) + n * f2
+/// The horizon as VP3 sees it: the unit normal `n` from the horizon towards the principal
+/// point and the principal point's distance `d` from the horizon (VP3 = pp + n·f²/d).
+#[derive(Debug, Clone, Copy)]
+struct Horizon {
+    n: Point2,
+    d: f64,
 }
 
-/// The horizon's direction and the principal point's foot on it.
-fn horizon(vp1: Point2, pp: Point2, roll: f64) -> (Point2, Point2) {
-    let h = Point2::new(roll.cos(), roll.sin());
-    (h, vp1 + h * (pp - vp1).dot(h))
+/// The horizon through VP1 at angle `roll`, seen from the principal point.
+fn horizon(vp1: Point2, pp: Point2, roll: f64) -> Horizon {
+    let normal = Point2::new(-roll.sin(), roll.cos());
+    let d = (pp - vp1).dot(normal);
+    if d < 0.0 {
+        Horizon {
+            n: normal * -1.0,
+            d: -d,
+        }
+    } else {
+        Horizon { n: normal, d }
+    }
+}
+
+/// The direction (not normalised) from `p` to VP3 for `f²`: `d·(pp − p) + f²·n`, which is
+/// VP3 − p times `d` (finite also where the horizon passes through pp and the verticals are
+/// parallel, along `n`).
+fn towards_vp3(p: Point2, pp: Point2, h: Horizon, f2: f64) -> Point2 {
+    (pp - p) * h.d + h.n * f2
 }
 
 /// The segment length pointing at VP3 for (`ln_f`, `roll`).
 fn support(c: &[Candidate], vp1: Point2, pp: Point2, ln_f: f64, roll: f64) -> f64 {
-    let (_, foot) = horizon(vp1, pp, roll);
+    let h = horizon(vp1, pp, roll);
     let f2 = (2.0 * ln_f).exp();
     c.iter()
         .map(|c| {
-            let t = towards_vp3(c.at, pp, foot, f2);
+            let t = towards_vp3(c.at, pp, h, f2);
             let r = line_angle_diff(c.angle - t.y.atan2(t.x)) / c.sd;
             c.weight * (-0.5 * r * r).exp()
         })
@@ -253,12 +267,12 @@ pub fn fit(
     }
     let window = opts.roll_window_deg.to_radians();
     let (ln_f, peak_roll) = peak(&candidates, vp1, pp, ln_range, roll, window);
-    let (_, foot) = horizon(vp1, pp, peak_roll);
+    let h = horizon(vp1, pp, peak_roll);
     let f2 = (2.0 * ln_f).exp();
     let supporting = candidates
         .iter()
         .filter(|c| {
-            let t = towards_vp3(c.at, pp, foot, f2);
+            let t = towards_vp3(c.at, pp, h, f2);
             line_angle_diff(c.angle - t.y.atan2(t.x)).abs() < 2.0 * c.sd
         })
         .count();
@@ -300,10 +314,8 @@ mod tests {
     fn view(f: f64, roll: f64) -> (Point2, Point2, Point2) {
         let pp = Point2::new(960.0, 540.0);
         let vp1 = Point2::new(700.0, -300.0);
-        let (_, foot) = horizon(vp1, pp, roll);
-        let n = pp - foot;
-        let d = n.norm();
-        (vp1, pp, pp + n * (f * f / (d * d)))
+        let h = horizon(vp1, pp, roll);
+        (vp1, pp, pp + h.n * (f * f / h.d))
     }
 
     /// Poles: segments on the lines from points of the frame towards VP3.
@@ -421,6 +433,31 @@ mod tests {
             b: a + (vp1 - a) * 0.3,
         };
         assert!(fit_none(&[along], vp1, pp));
+    }
+
+    #[test]
+    fn a_level_camera_sees_parallel_verticals_that_say_nothing_of_f() {
+        // The horizon through the principal point: VP3 at infinity for every f.
+        let pp = Point2::new(960.0, 540.0);
+        let vp1 = Point2::new(300.0, 540.0);
+        let segments: Vec<Segment> = FEET
+            .iter()
+            .map(|&(x, y)| Segment {
+                a: Point2::new(x, y),
+                b: Point2::new(x, y - 100.0),
+            })
+            .collect();
+        let fit = fit(
+            &segments,
+            vp1,
+            pp,
+            0.0,
+            [500.0, 15000.0],
+            &VerticalOptions::default(),
+            1,
+        )
+        .unwrap();
+        assert!(!fit.identified, "{fit:?}");
     }
 
     fn fit_none(segments: &[Segment], vp1: Point2, pp: Point2) -> bool {
