@@ -80,10 +80,20 @@ pub const MODEL_LOG_SD: f64 = 0.18;
 /// systematic turn of the evidence moves `ln f`; 0 where none was measured) and
 /// [`MODEL_LOG_SD`]. A bootstrap without spread (or none) still leaves the model error.
 pub fn measured_log_sd(bootstrap: [f64; 2], turn: f64) -> f64 {
-    let finite = |x: f64| if x.is_finite() { x } else { 0.0 };
-    let b = finite(0.5 * (bootstrap[1] / bootstrap[0]).ln().abs());
-    let t = finite(turn);
+    let b = bootstrap_log_sd(bootstrap);
+    let t = if turn.is_finite() { turn } else { 0.0 };
     (b * b + t * t + MODEL_LOG_SD * MODEL_LOG_SD).sqrt()
+}
+
+/// The spread in `ln f` of a bootstrap whose focal lengths spread over `[p16, p84]`: half
+/// their log width (0 where that is not finite).
+pub fn bootstrap_log_sd(bootstrap: [f64; 2]) -> f64 {
+    let b = 0.5 * (bootstrap[1] / bootstrap[0]).ln().abs();
+    if b.is_finite() {
+        b
+    } else {
+        0.0
+    }
 }
 
 /// What a cue says about `ln f`.

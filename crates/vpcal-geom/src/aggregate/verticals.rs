@@ -18,7 +18,7 @@
 //! [`VerticalOptions::min_supporting`] segments, is not identified. The segments'
 //! bootstrap gives its spread; [`VERTICALS_MODEL_LOG_SD`] its model error.
 
-use super::focal::{FocalSource, Likelihood};
+use super::focal::{bootstrap_log_sd, FocalSource, Likelihood};
 use super::line_angle_diff;
 use crate::point::Point2;
 use crate::solve::{par_map, percentile, SplitMix};
@@ -119,8 +119,7 @@ impl FocalSource for VerticalsFit {
         if !self.identified {
             return None;
         }
-        let b = 0.5 * (self.bootstrap_px[1] / self.bootstrap_px[0]).ln().abs();
-        let b = if b.is_finite() { b } else { 0.0 };
+        let b = bootstrap_log_sd(self.bootstrap_px);
         Some(Likelihood::LogNormal {
             focal_px: self.focal_px,
             log_sd: (b * b + VERTICALS_MODEL_LOG_SD * VERTICALS_MODEL_LOG_SD).sqrt(),
@@ -332,6 +331,25 @@ mod tests {
             .collect()
     }
 
+    /// [`fit`] over 500-15,000 px with the default options.
+    fn fit_default(
+        segments: &[Segment],
+        vp1: Point2,
+        pp: Point2,
+        roll: f64,
+        seed: u64,
+    ) -> Option<VerticalsFit> {
+        fit(
+            segments,
+            vp1,
+            pp,
+            roll,
+            [500.0, 15000.0],
+            &VerticalOptions::default(),
+            seed,
+        )
+    }
+
     const FEET: [(f64, f64); 8] = [
         (100.0, 900.0),
         (300.0, 700.0),
@@ -351,16 +369,7 @@ mod tests {
             let segments = poles(vp3, &FEET, 120.0);
             // The search starts 1.5° off the true roll.
             let start = roll + 1.5_f64.to_radians();
-            let fit = fit(
-                &segments,
-                vp1,
-                pp,
-                start,
-                [500.0, 15000.0],
-                &VerticalOptions::default(),
-                1,
-            )
-            .unwrap();
+            let fit = fit_default(&segments, vp1, pp, start, 1).unwrap();
             assert!(fit.identified, "{fit:?}");
             assert!((fit.focal_px / f - 1.0).abs() < 0.02, "f {f}: {fit:?}");
             assert!((fit.roll - roll).abs() < 0.2_f64.to_radians(), "{fit:?}");
@@ -396,16 +405,7 @@ mod tests {
                 b: a + Point2::new(t.cos(), t.sin()) * 20.0,
             });
         }
-        let fit = fit(
-            &segments,
-            vp1,
-            pp,
-            0.0,
-            [500.0, 15000.0],
-            &VerticalOptions::default(),
-            3,
-        )
-        .unwrap();
+        let fit = fit_default(&segments, vp1, pp, 0.0, 3).unwrap();
         assert!(fit.identified);
         assert!((fit.focal_px / f - 1.0).abs() < 0.03, "{fit:?}");
     }
@@ -414,16 +414,7 @@ mod tests {
     fn too_few_verticals_are_not_identified() {
         let (vp1, pp, vp3) = view(2000.0, 0.0);
         let segments = poles(vp3, &FEET[..2], 100.0);
-        let fit = fit(
-            &segments,
-            vp1,
-            pp,
-            0.0,
-            [500.0, 15000.0],
-            &VerticalOptions::default(),
-            1,
-        )
-        .unwrap();
+        let fit = fit_default(&segments, vp1, pp, 0.0, 1).unwrap();
         assert!(!fit.identified);
         assert!(fit.likelihood().is_none());
         // Nothing but lines along the road: no candidate at all.
@@ -432,7 +423,7 @@ mod tests {
             a,
             b: a + (vp1 - a) * 0.3,
         };
-        assert!(fit_none(&[along], vp1, pp));
+        assert!(fit_default(&[along], vp1, pp, 0.0, 1).is_none());
     }
 
     #[test]
@@ -447,29 +438,7 @@ mod tests {
                 b: Point2::new(x, y - 100.0),
             })
             .collect();
-        let fit = fit(
-            &segments,
-            vp1,
-            pp,
-            0.0,
-            [500.0, 15000.0],
-            &VerticalOptions::default(),
-            1,
-        )
-        .unwrap();
+        let fit = fit_default(&segments, vp1, pp, 0.0, 1).unwrap();
         assert!(!fit.identified, "{fit:?}");
-    }
-
-    fn fit_none(segments: &[Segment], vp1: Point2, pp: Point2) -> bool {
-        fit(
-            segments,
-            vp1,
-            pp,
-            0.0,
-            [500.0, 15000.0],
-            &VerticalOptions::default(),
-            1,
-        )
-        .is_none()
     }
 }

@@ -716,10 +716,9 @@ fn focal_summary(
     })
 }
 
-/// The focal length of a reference camera: `sqrt(-(vp1 - pp)·(vp2 - pp))`.
+/// The focal length of a reference camera.
 fn truth_focal(c: &CameraTruth) -> Option<f64> {
-    let f2 = -(c.vp1 - c.pp).dot(c.vp2 - c.pp);
-    (f2 > 0.0).then(|| f2.sqrt())
+    vpcal_geom::camera::focal_from_vps(c.vp1, c.vp2, c.pp)
 }
 
 /// Aggregate every VPout file with every method and evaluate it; the library entry point of
