@@ -33,7 +33,7 @@ import numpy as np
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 DATA = os.environ.get("VPCAL_DATA", os.path.join(ROOT, "..", "shared", "data"))
-MODEL_LOG_SD = 0.20  # vpcal_geom::aggregate::verticals::VERTICALS_MODEL_LOG_SD
+MODEL_LOG_SD = 0.14  # vpcal_geom::aggregate::verticals::VERTICALS_MODEL_LOG_SD
 
 
 def example():

@@ -122,6 +122,12 @@ impl SplitMix {
     pub fn next_f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
+    /// A standard normal deviate (Box-Muller, one of the pair).
+    pub fn normal(&mut self) -> f64 {
+        let u1 = self.next_f64().max(f64::MIN_POSITIVE);
+        let u2 = self.next_f64();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
     /// Poisson(1) count (inverse transform).
     pub fn poisson1(&mut self) -> f64 {
         let u = self.next_f64();

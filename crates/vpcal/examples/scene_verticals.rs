@@ -1,9 +1,10 @@
 //! The scene's vertical lines of one picture, given its VP1 and horizon: `cargo run
-//! --release --example scene_verticals -- IMAGE VP1X VP1Y ROLL_DEG` prints a JSON object
-//! with the line segments' count and the verticals' fit (`vpcal_geom::aggregate::verticals`),
+//! --release --example scene_verticals -- IMAGE VP1X VP1Y ROLL_DEG [SEGMENTS_JSON]` prints a
+//! JSON object with the line segments' count and the verticals' fit (`vpcal_geom::aggregate::verticals`),
 //! the principal point at the picture's middle and the search over the focal prior's
 //! support. `scripts/scene_verticals_focal.py` runs it on the BrnoCompSpeed views and the
-//! synthetic suite against their true cameras.
+//! synthetic suite against their true cameras. SEGMENTS_JSON, if given, receives every line
+//! segment's ends `[ax, ay, bx, by]` (to draw them).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use vpcal_geom::aggregate::focal::{focal_prior_range_widths, support};
@@ -14,8 +15,8 @@ use vpcal_video::segments::{line_segments, SegmentOptions};
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     assert!(
-        args.len() == 5,
-        "usage: scene_verticals IMAGE VP1X VP1Y ROLL_DEG"
+        args.len() == 5 || args.len() == 6,
+        "usage: scene_verticals IMAGE VP1X VP1Y ROLL_DEG [SEGMENTS_JSON]"
     );
     let number = |i: usize| args[i].parse::<f64>().expect("a number");
     let image =
@@ -30,6 +31,7 @@ fn main() {
         vp1,
         pp,
         number(4).to_radians(),
+        0.0,
         range,
         &VerticalOptions::default(),
         0,
@@ -46,4 +48,11 @@ fn main() {
         })),
     });
     println!("{out}");
+    if let Some(path) = args.get(5) {
+        let ends: Vec<[f64; 4]> = segments
+            .iter()
+            .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
+            .collect();
+        std::fs::write(path, serde_json::to_string(&ends).unwrap()).expect("writing SEGMENTS_JSON");
+    }
 }

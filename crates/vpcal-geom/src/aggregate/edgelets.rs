@@ -843,12 +843,7 @@ mod tests {
     /// Normal deviates (Box-Muller) with standard deviation `s`.
     fn normals(n: usize, s: f64, seed: u64) -> Vec<f64> {
         let mut rng = SplitMix(seed);
-        (0..n)
-            .map(|_| {
-                let (u, v) = (rng.next_f64().max(1e-12), rng.next_f64());
-                s * (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-            })
-            .collect()
+        (0..n).map(|_| s * rng.normal()).collect()
     }
 
     #[test]

@@ -632,15 +632,36 @@ pub fn aggregate_with_scene(
     // edges across the vehicles not where those edges are parallel in the image (a view
     // straight down, where f cannot be observed).
     let trusted = rays_trusted.then(|| trusted_rays(x[0].exp(), samples.as_ref()));
-    // The scene's vertical lines need only the horizon: VP1 on it and its roll.
+    // The scene's vertical lines need only the horizon: VP1 on it and its roll, with the
+    // roll's spread (the edgelets' where they set it, else the bootstrap's).
     let horizon_placed = curved_fit.is_some() || !road.road_curved;
+    let roll_sd_deg = curved_fit
+        .map(|c| c.roll_sd_deg)
+        .or(usable.map(|e| e.roll_sd_deg))
+        .or_else(|| {
+            samples
+                .as_ref()
+                .filter(|b| b.horizon_deg.len() > 1)
+                .map(|b| horizon_sd_deg(b, x[1].to_degrees()))
+        })
+        .unwrap_or(0.0);
     let vertical_fit = opts
         .verticals
         .as_ref()
         .filter(|_| horizon_placed && !scene_view.segments.is_empty())
         .and_then(|vo| {
             let support = focal::support(range_px);
-            verticals::fit(scene_view.segments, vp1, pp, x[1], support, vo, opts.seed)
+            let roll_sd = roll_sd_deg.to_radians();
+            verticals::fit(
+                scene_view.segments,
+                vp1,
+                pp,
+                x[1],
+                roll_sd,
+                support,
+                vo,
+                opts.seed,
+            )
         });
     let vertical = vertical_fit.as_ref().map(|v| v as &dyn FocalSource);
     let sources: Vec<&dyn FocalSource> = match &curved_fit {
@@ -886,6 +907,17 @@ fn trusted_rays(focal_px: f64, samples: Option<&Samples>) -> focal::Measured {
     }
 }
 
+/// The standard deviation of the resamples' horizon angles, degrees, measured as line angles
+/// around `a0_deg` (angles near ±180° wrap).
+fn horizon_sd_deg(b: &Samples, a0_deg: f64) -> f64 {
+    let angles: Vec<f64> = b
+        .horizon_deg
+        .iter()
+        .map(|a| line_angle_diff((a - a0_deg).to_radians()).to_degrees())
+        .collect();
+    sd(&angles)
+}
+
 /// The estimate's spread from the bootstrap's resamples `b`; `edges`: where an edgelet fit
 /// set the roll, its roll's spread, whether it carried f, and its focal percentiles.
 fn confidence(
@@ -905,14 +937,10 @@ fn confidence(
     }
     .fit(&prep.weight, None)[0]
         .exp();
-    // Horizon angles near +-180 wrap: measure them as line angles around the estimate.
-    let a0 = calibration.horizon.angle().to_degrees();
-    let angles: Vec<f64> = b
-        .horizon_deg
-        .iter()
-        .map(|a| line_angle_diff((a - a0).to_radians()).to_degrees())
-        .collect();
-    let horizon_sd = edges.map_or_else(|| sd(&angles), |e| e.0);
+    let horizon_sd = edges.map_or_else(
+        || horizon_sd_deg(b, calibration.horizon.angle().to_degrees()),
+        |e| e.0,
+    );
     // Where f is held (untrusted rays), all of this bootstrap's resamples agree.
     let (p16, p84) = match edges {
         Some((_, true, p16, p84)) => (p16, p84),

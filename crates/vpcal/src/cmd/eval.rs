@@ -689,19 +689,26 @@ pub struct FocalSummary {
     pub covered: usize,
     /// Median of the intervals' long end over their short end.
     pub median_hi_lo: f64,
+    /// Median of |horizon angle - reference's|, degrees (the roll's error).
+    pub median_abs_roll_error_deg: f64,
 }
 
-/// The focal lengths `focal` (with their `interval`s) against the references `truth`.
+/// The focal lengths `focal` (with their `interval`s) and horizon angles `roll` (degrees)
+/// against the references `truth` (focal length, horizon angle).
 fn focal_summary(
     focal: &[Option<f64>],
     interval: &[Option<[f64; 2]>],
-    truth: &[Option<f64>],
+    roll: &[Option<f64>],
+    truth: &[Option<(f64, f64)>],
 ) -> Option<FocalSummary> {
-    let (mut errors, mut ratios, mut covered) = (Vec::new(), Vec::new(), 0);
-    for ((f, iv), t) in focal.iter().zip(interval).zip(truth) {
-        let (Some(f), Some(t)) = (f, t) else {
+    let (mut errors, mut ratios, mut covered, mut rolls) = (Vec::new(), Vec::new(), 0, Vec::new());
+    for (((f, iv), r), t) in focal.iter().zip(interval).zip(roll).zip(truth) {
+        let (Some(f), Some((t, t_roll))) = (f, t) else {
             continue;
         };
+        if let Some(r) = r {
+            rolls.push(((r - t_roll + 90.0).rem_euclid(180.0) - 90.0).abs());
+        }
         errors.push(100.0 * (f / t - 1.0).abs());
         if let Some([lo, hi]) = iv {
             ratios.push(hi / lo);
@@ -713,12 +720,21 @@ fn focal_summary(
         median_abs_error_pct: vpcal_geom::metrics::median(&errors)?,
         covered,
         median_hi_lo: vpcal_geom::metrics::median(&ratios).unwrap_or(f64::NAN),
+        median_abs_roll_error_deg: vpcal_geom::metrics::median(&rolls).unwrap_or(f64::NAN),
     })
 }
 
-/// The focal length of a reference camera.
-fn truth_focal(c: &CameraTruth) -> Option<f64> {
-    vpcal_geom::camera::focal_from_vps(c.vp1, c.vp2, c.pp)
+/// The angle of the horizon through `vp1` and `vp2`, degrees.
+fn horizon_deg(vp1: vpcal_geom::Point2, vp2: vpcal_geom::Point2) -> f64 {
+    (vp2.y - vp1.y).atan2(vp2.x - vp1.x).to_degrees()
+}
+
+/// The focal length and horizon angle (degrees) of a reference camera.
+fn truth_camera(c: &CameraTruth) -> Option<(f64, f64)> {
+    Some((
+        vpcal_geom::camera::focal_from_vps(c.vp1, c.vp2, c.pp)?,
+        horizon_deg(c.vp1, c.vp2),
+    ))
 }
 
 /// Aggregate every VPout file with every method and evaluate it; the library entry point of
@@ -791,14 +807,14 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             })
         })
         .collect();
-    /// One scored job: video index, VPout file stem, method, its row, focal length and its
-    /// interval.
+    /// One scored job: video index, VPout file stem, method, its row, focal length, its
+    /// interval and the horizon's angle (degrees).
     type Outcome = (
         usize,
         String,
         Method,
         VideoResult,
-        Option<(f64, Option<[f64; 2]>)>,
+        Option<(f64, Option<[f64; 2]>, f64)>,
     );
     let outcomes: Vec<Result<Outcome>> = jobs
         .par_iter()
@@ -851,7 +867,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                     }
                     (
                         evaluate_one(video, Some(&system), measurements, &ScaleMode::FromFile),
-                        Some((focal_px, interval)),
+                        Some((focal_px, interval, horizon_deg(a.vp1, vp2))),
                     )
                 }
                 Err(e) => {
@@ -874,6 +890,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
             let mut videos_rows = Vec::new();
             let mut focals = Vec::new();
             let mut intervals = Vec::new();
+            let mut rolls = Vec::new();
             let mut truths = Vec::new();
             for (vi, (video, measurements, _, _, _)) in work.iter().enumerate() {
                 match rows
@@ -884,6 +901,7 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                         videos_rows.push(r.3.clone());
                         focals.push(r.4.map(|f| f.0));
                         intervals.push(r.4.and_then(|f| f.1));
+                        rolls.push(r.4.map(|f| f.2));
                     }
                     None => {
                         videos_rows.push(evaluate_one(
@@ -894,18 +912,19 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                         ));
                         focals.push(None);
                         intervals.push(None);
+                        rolls.push(None);
                     }
                 }
                 truths.push(
                     truth
                         .as_ref()
                         .and_then(|t| t.get(video))
-                        .and_then(truth_focal),
+                        .and_then(truth_camera),
                 );
             }
             let focal_summary = truth
                 .is_some()
-                .then(|| focal_summary(&focals, &intervals, &truths))
+                .then(|| focal_summary(&focals, &intervals, &rolls, &truths))
                 .flatten();
             out.push(VpoutResult {
                 variant: variant.clone(),
@@ -913,7 +932,9 @@ pub fn evaluate_vpout(args: &VpoutArgs) -> Result<Vec<VpoutResult>> {
                 result: pool(format!("{variant}_{}", method.name()), videos_rows),
                 focal_px: focals,
                 focal_interval_px: intervals,
-                focal_truth_px: truth.is_some().then_some(truths),
+                focal_truth_px: truth
+                    .is_some()
+                    .then(|| truths.iter().map(|t| t.map(|t| t.0)).collect()),
                 focal_summary,
             });
         }
@@ -973,8 +994,12 @@ fn run_vpout(args: &VpoutArgs) -> Result<()> {
             for r in &rows {
                 let cell = match &r.focal_summary {
                     Some(f) => format!(
-                        "{:.1} % {}/{} x{:.2}",
-                        f.median_abs_error_pct, f.covered, f.videos, f.median_hi_lo
+                        "{:.1} % {}/{} x{:.2} {:.2}°",
+                        f.median_abs_error_pct,
+                        f.covered,
+                        f.videos,
+                        f.median_hi_lo,
+                        f.median_abs_roll_error_deg
                     ),
                     None => "-".into(),
                 };
@@ -983,7 +1008,7 @@ fn run_vpout(args: &VpoutArgs) -> Result<()> {
             println!("{focal}");
             println!(
                 "  (median |focal error|, 68 % intervals holding the reference / videos, their \
-                 median long/short end)"
+                 median long/short end, median |horizon angle error|)"
             );
         }
     }
