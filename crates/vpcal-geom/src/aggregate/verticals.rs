@@ -19,8 +19,11 @@
 //! VP3 in the picture and the roll with it; a few only tell a combination of `f` and the roll,
 //! and the roll's prior then decides where on that ridge `f` lies. A maximum, not a
 //! least-squares fit: most segments are not verticals, and the verticals' own VP3 is a peak
-//! among them. A peak at the search's end of `ln f`, or carried by fewer than
-//! [`VerticalOptions::min_supporting`] segments, is not identified. The segments' bootstrap,
+//! among them. A peak at the search's end of `ln f`, carried by fewer than
+//! [`VerticalOptions::min_supporting`] segments, whose profile does not fall by
+//! [`IDENTIFIED_DROP`] at half and twice its `f` (a far VP3: nearly parallel verticals bound
+//! `f` on one side only), or no more likely than the same segments pointing anywhere
+//! ([`VerticalOptions::null_draws`]) is not identified. The segments' bootstrap,
 //! each resample with its own draw of the roll's prior centre, gives the spread (the ridge's
 //! too); [`VERTICALS_MODEL_LOG_SD`] its model error.
 
