@@ -57,11 +57,12 @@ impl Segment {
 
 /// The vertical lines' model error, standard deviation in `ln f`, in quadrature with the
 /// segments' bootstrap: given the true VP1 and horizon (`scripts/scene_verticals_focal.py`),
-/// the identified fits' errors have an rms of 0.136 in `ln f` on the BrnoCompSpeed views of
+/// the identified fits' errors have an rms of 0.108 in `ln f` on the BrnoCompSpeed views of
 /// sessions 0-3 (real, 1080p, against the reference cameras, whose own focal lengths are
-/// fitted to taped distances; 9 of 12 identified) and 0.086 on the synthetic suite (12 of
-/// 14): the real views' rms, rounded up. Trees lean, posts are not plumb, a view's few poles
-/// may all stand on one side, and a road's grade tilts VP1 off gravity's horizon.
+/// fitted to taped distances; 8 of 12 identified) and 0.006 on the synthetic suite (9 of 14):
+/// the real views' rms, rounded up with a margin for VP1 and horizon errors, which that
+/// measurement leaves out. Trees lean, posts are not plumb, a view's few poles may all stand
+/// on one side, and a road's grade tilts VP1 off gravity's horizon.
 pub const VERTICALS_MODEL_LOG_SD: f64 = 0.14;
 
 /// Settings of [`fit`].
@@ -316,9 +317,9 @@ fn best_over(
     best
 }
 
-/// The best (score, `ln f`, roll) over `ln f` in `fs` (one value for a profile, or the
-/// search's range as `[lo, hi]` with `coarse` set) and the roll within `window` of the
-/// prior's centre: a coarse grid, then a fine one around its best.
+/// The best (score, `ln f`, roll) over `ln f` in `ln_range` (`[lf, lf]` for one value of the
+/// profile) and the roll within `window` of the prior's centre: a coarse grid, then a fine
+/// one around its best.
 fn search(
     c: &[Candidate],
     frame: Frame,
