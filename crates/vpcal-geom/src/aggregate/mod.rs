@@ -24,7 +24,7 @@ mod vp1;
 use crate::point::{BoxPx, Point2};
 
 /// Wrap an angle difference of two lines (undirected) to (-pi/2, pi/2].
-pub(crate) fn line_angle_diff(a: f64) -> f64 {
+pub fn line_angle_diff(a: f64) -> f64 {
     let pi = std::f64::consts::PI;
     a - pi * (a / pi).round()
 }

@@ -12,6 +12,7 @@ use vpcal::output;
 use vpcal::overlay;
 use vpcal_formats::bcs::{read_gt, read_system};
 use vpcal_formats::calib::{DemoComparison, RatioErrors};
+use vpcal_geom::aggregate::line_angle_diff;
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::{optimal_scale, ratio_errors, scaled_distance_errors, summarize};
 use vpcal_synth::scene::{render_scene, SceneSpec, WriteOptions};
@@ -121,11 +122,8 @@ pub fn run(mut a: Args) -> Result<Exit> {
     let ratio = ratio_errors(&cal, &measurements)
         .and_then(|v| summarize(&v))
         .context("the ground-truth road points cannot be projected with the estimate")?;
-    let horizon_diff = {
-        let d = (cal.horizon.angle() - truth.horizon.angle()).to_degrees();
-        // Lines have no direction: fold into (-90, 90].
-        (d + 90.0).rem_euclid(180.0) - 90.0
-    };
+    // Lines have no direction: the difference folded to within 90°.
+    let horizon_diff = line_angle_diff(cal.horizon.angle() - truth.horizon.angle()).to_degrees();
     // Horizon height at the image centre, as a fraction of the image height.
     let cx = f64::from(out.info.width) / 2.0;
     let hy = |c: &Calibration| c.horizon.y_at(cx).unwrap_or(f64::NAN);

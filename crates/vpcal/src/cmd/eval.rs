@@ -25,7 +25,7 @@ use vpcal_formats::bcs_speed::{
     SpeedError, SpeedMode, VideoSpeed,
 };
 use vpcal_formats::reference::{read_vpout, SceneRecord};
-use vpcal_geom::aggregate::VehicleVps;
+use vpcal_geom::aggregate::{line_angle_diff, VehicleVps};
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::metrics::{
     optimal_scale, ratio_errors, scaled_distance_errors, summarize, RoadMeasurement, Summary,
@@ -707,7 +707,11 @@ fn focal_summary(
             continue;
         };
         if let Some(r) = r {
-            rolls.push(((r - t_roll + 90.0).rem_euclid(180.0) - 90.0).abs());
+            rolls.push(
+                line_angle_diff((r - t_roll).to_radians())
+                    .to_degrees()
+                    .abs(),
+            );
         }
         errors.push(100.0 * (f / t - 1.0).abs());
         if let Some([lo, hi]) = iv {
