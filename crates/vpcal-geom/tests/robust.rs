@@ -11,7 +11,7 @@ use vpcal_geom::aggregate::focal::{self, focal_prior_range_widths, focal_widths,
 use vpcal_geom::aggregate::rays::{rays_focal_likelihood, rays_focal_posterior};
 use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
 use vpcal_geom::aggregate::tracks::Tangent;
-use vpcal_geom::aggregate::VehicleVps;
+use vpcal_geom::aggregate::{line_angle_diff, VehicleVps};
 use vpcal_geom::camera::Calibration;
 use vpcal_geom::{BoxPx, Point2};
 
@@ -521,8 +521,9 @@ fn vehicle_tracks_replace_scattered_biased_vp1_rays() {
     assert!(exact.evidence.vp1_from_tracks, "{:?}", exact.evidence);
 }
 
-/// Per vehicle: 20 edgelets inside its box pointing at the true VP2 (0.5° noise), 10 at the
-/// true VP1 (the vehicle's length; 0.5° noise) and 4 at random angles.
+/// Per vehicle: 20 edgelets inside its box pointing at the true VP2 (turned towards VP1 by
+/// the real vehicles' `edgelets::EDGE_TURN_DEG`; 0.5° noise), 10 at the true VP1 (the
+/// vehicle's length; 0.5° noise) and 4 at random angles.
 fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Edgelet>> {
     let mut rng = Lcg(seed);
     let vp1 = scene.vp([0.0, 1.0, 0.0]);
@@ -539,7 +540,11 @@ fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Ed
                     );
                     let to = |q: Point2| (q.y - p.y).atan2(q.x - p.x);
                     let angle = match k {
-                        0..20 => to(vp2) + 0.5f64.to_radians() * rng.normal(),
+                        0..20 => {
+                            let towards_vp1 = line_angle_diff(to(vp1) - to(vp2)).signum();
+                            let turn = edgelets::EDGE_TURN_DEG.to_radians() * towards_vp1;
+                            to(vp2) + turn + 0.5f64.to_radians() * rng.normal()
+                        }
                         20..30 => to(vp1) + 0.5f64.to_radians() * rng.normal(),
                         _ => std::f64::consts::PI * rng.next(),
                     };

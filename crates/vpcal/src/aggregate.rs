@@ -620,6 +620,10 @@ pub fn aggregate(
                 "vp2_rays_only_focal_px": r.confidence.as_ref().map(|c| c.focal_px_data_only),
             });
             if let Some(o) = evidence.as_object_mut() {
+                o.insert(
+                    "edgelet_roll_turn_sd_deg".into(),
+                    serde_json::json!(e.edgelet_roll_turn_sd_deg),
+                );
                 // The scene's vertical lines (`vpcal_geom::aggregate::verticals`).
                 o.insert("vertical_candidates".into(), e.vertical_candidates.into());
                 o.insert("vertical_supporting".into(), e.vertical_supporting.into());

@@ -10,7 +10,9 @@
 //! at VP1 (`exclude_vp1_deg`). With VP1 fixed, the camera is `(f, roll)`: VP2 is the point of
 //! the horizon through VP1 at angle `roll` that is orthogonal to VP1 for `f`. The fit
 //! minimises a Cauchy loss of the angles between the edgelets and the directions from them to
-//! VP2 (a grid, then Nelder-Mead), and a bootstrap over vehicles measures its spread.
+//! VP2 (a grid, then Nelder-Mead), and a bootstrap over vehicles measures its spread. Every
+//! edge is first turned back by the vehicles' systematic turn towards VP1 ([`EDGE_TURN_DEG`]),
+//! and refits with that turn's uncertainty measure what it moves the roll and f.
 //!
 //! Why: the bundled network's VP2 rays are right in the mean only on some scenes; its roll is
 //! pulled towards 0° (the aggregator's roll prior, and the network's own). On the synthetic
@@ -93,8 +95,8 @@ pub struct EdgeletFitOptions {
     pub max_focal_log_spread: f64,
     /// ... and VP2 lies within this many image widths of the principal point ...
     pub max_vp2_widths: f64,
-    /// ... and a systematic turn of the edges by [`EDGE_BIAS_DEG`] either way moves it by
-    /// less than this (half of the `ln f` difference).
+    /// ... and a systematic turn of the edges by 1° either way moves it by less than this
+    /// (half of the `ln f` difference; [`EdgeletFit::focal_bias_log_spread`]).
     #[serde(default = "default_max_focal_bias_log_spread")]
     pub max_focal_bias_log_spread: f64,
 }
@@ -103,17 +105,26 @@ fn default_max_focal_bias_log_spread() -> f64 {
     MAX_FOCAL_BIAS_LOG_SPREAD
 }
 
-/// The systematic turn of the edges across real vehicles towards the vehicle's length (the
+/// The systematic turn of the edges across vehicles towards the vehicle's length (the
 /// direction to VP1), degrees: rounded fronts and rears, wheel arches, reflections and
-/// shadows turn the edges a little the same way on every vehicle, which no resampling of the
-/// vehicles reveals. A turn of all edges the same way round would be absorbed by the roll; a
-/// turn towards VP1 moves VP2 along the horizon, i.e. the focal length. The fit measures how
-/// far a turn of this size either way moves its focal length. Size: the median signed VP2
-/// direction error (towards VP1 positive) of the per-vehicle edgelet fits on the real KITTI
-/// vehicles with exact truth was +0.95° on the 18 clean vehicles with a fit and +2.40° on 24
-/// occluded, truncated or small ones (`vpcal eval kitti --data $VPCAL_DATA/real/kitti_object
-/// --all`); the clean vehicles' value, rounded, is used.
-pub const EDGE_BIAS_DEG: f64 = 1.0;
+/// shadows, and the edge filter's reach into the vehicle's other edges, turn the edges a
+/// little the same way on every vehicle, which no resampling of the vehicles reveals. Below
+/// the horizon and between the two VPs, "towards VP1" is the same way round for every
+/// vehicle, so the turn moves VP2 across the horizon (the roll) as much as along it (the
+/// focal length). The fit turns every edge back by this much. Size: the median signed VP2
+/// direction error (towards VP1 positive) of the per-vehicle edgelet fits is +0.48° on the 18
+/// clean real KITTI vehicles with a fit (`vpcal eval kitti --data
+/// $VPCAL_DATA/real/kitti_object --all`; +1.85° on 26 occluded, truncated or small ones), and
+/// the median of each box's robust fit of its edgelets' turn towards VP1 is +0.38° over 6,209
+/// boxes of the six synthetic speed scenes (per scene +0.20 to +0.62°; `scripts/edge_turn.py`,
+/// true boxes); rounded, 0.5°.
+pub const EDGE_TURN_DEG: f64 = 0.5;
+
+/// The uncertainty of [`EDGE_TURN_DEG`], degrees: what it moves the roll and `ln f` (measured
+/// by refits with the edges turned back by a degree less and more) is their systematic
+/// spread. It covers the renders' per-scene turns (0.20-0.62°) and the clean KITTI
+/// vehicles' (0.48°), not KITTI's occluded, truncated or small ones' (1.85°).
+pub const EDGE_TURN_SD_DEG: f64 = 0.5;
 
 impl Default for EdgeletFitOptions {
     fn default() -> Self {
@@ -204,14 +215,18 @@ pub struct EdgeletFit {
     pub vehicles: usize,
     /// Bootstrap spread of the roll, degrees (`bootstrap_spread`).
     pub roll_sd_deg: f64,
+    /// How far the uncertainty of the edges' systematic turn ([`EDGE_TURN_SD_DEG`]) moves
+    /// the roll, degrees: half the roll difference between the fits with the edges turned
+    /// back by [`EDGE_TURN_DEG`] ∓ 1°, per degree, times that uncertainty.
+    pub roll_turn_sd_deg: f64,
     pub focal_px_p16: f64,
     pub focal_px_p84: f64,
     /// Whether the roll and the focal length pass the identifiability gates.
     pub roll_usable: bool,
     pub focal_usable: bool,
-    /// Half of the `ln f` difference between fits with every edge turned by
-    /// [`EDGE_BIAS_DEG`] towards and away from VP1: how much a systematic edge bias moves `f`
-    /// (large when VP2 is far, where the edges are nearly parallel).
+    /// How far a systematic turn of every edge by 1° moves `ln f`: half of the `ln f`
+    /// difference between the same two fits as `roll_turn_sd_deg`'s (large when VP2 is far,
+    /// where the edges are nearly parallel).
     pub focal_bias_log_spread: f64,
 }
 
@@ -222,12 +237,17 @@ impl EdgeletFit {
         0.5 * (self.focal_px_p84 / self.focal_px_p16).ln()
     }
 
+    /// The roll's spread, degrees: its bootstrap's and the edges' turn's together.
+    pub fn roll_total_sd_deg(&self) -> f64 {
+        self.roll_sd_deg.hypot(self.roll_turn_sd_deg)
+    }
+
     fn measured(&self) -> Measured {
         Measured {
             name: "edgelets",
             focal_px: self.focal_px,
             bootstrap_px: [self.focal_px_p16, self.focal_px_p84],
-            turn: self.focal_bias_log_spread,
+            turn: self.focal_bias_log_spread * EDGE_TURN_SD_DEG,
         }
     }
 }
@@ -277,42 +297,29 @@ pub(super) fn vp2_direction(vp1: Point2, pp: Point2, ln_f: f64, roll: f64) -> (P
 struct Flat {
     point: Vec<Point2>,
     angle: Vec<f64>,
+    /// +1 where turning the edgelet counter-clockwise (a positive angle) turns it towards
+    /// the direction to VP1 at its place, else -1.
+    towards_vp1: Vec<f64>,
     group: Vec<usize>,
     groups: usize,
     vehicle_of_group: Vec<usize>,
     vehicles: usize,
 }
 
-fn cost(flat: &Flat, gw: &[f64], vp1: Point2, pp: Point2, x: &[f64], s: f64) -> f64 {
-    cost_turned(flat, gw, vp1, pp, x, s, 0.0)
-}
-
-/// [`cost`] with every edgelet's angle turned by `turn` radians towards the direction to VP1
-/// at its place (away from it when `turn` is negative).
-fn cost_turned(
-    flat: &Flat,
-    gw: &[f64],
-    vp1: Point2,
-    pp: Point2,
-    x: &[f64],
-    s: f64,
-    turn: f64,
-) -> f64 {
+/// The fit's cost of `x = [ln f, roll]`: a Cauchy loss (scale `s`, radians) of the angles
+/// between the edgelets, each turned by `turn` radians towards the direction to VP1 at its
+/// place (away from it when `turn` is negative), and the directions from them to VP2.
+fn cost(flat: &Flat, gw: &[f64], vp1: Point2, pp: Point2, x: &[f64], s: f64, turn: f64) -> f64 {
     let (h, u) = vp2_direction(vp1, pp, x[0], x[1]);
     let mut c = 0.0;
-    for ((p, a), g) in flat.point.iter().zip(&flat.angle).zip(&flat.group) {
+    let edgelets = flat.point.iter().zip(&flat.angle).zip(&flat.towards_vp1);
+    for (((p, a), t), g) in edgelets.zip(&flat.group) {
         let w = gw[*g];
         if w == 0.0 {
             continue;
         }
         let d = (vp1 - *p) * u + h;
-        let a = if turn == 0.0 {
-            *a
-        } else {
-            let to_vp1 = vp1 - *p;
-            a + turn * line_angle_diff(to_vp1.y.atan2(to_vp1.x) - a).signum()
-        };
-        let r = line_angle_diff(a - d.y.atan2(d.x)) / s;
+        let r = line_angle_diff(a + turn * t - d.y.atan2(d.x)) / s;
         c += w * (1.0 + r * r).ln();
     }
     c
@@ -386,6 +393,7 @@ pub fn fit(
     let mut flat = Flat {
         point: vec![],
         angle: vec![],
+        towards_vp1: vec![],
         group: vec![],
         groups: 0,
         vehicle_of_group: vec![],
@@ -399,8 +407,11 @@ pub fn fit(
         }
         next += step;
         for (p, a) in v {
+            let to_vp1 = vp1 - *p;
             flat.point.push(*p);
             flat.angle.push(*a);
+            flat.towards_vp1
+                .push(line_angle_diff(to_vp1.y.atan2(to_vp1.x) - a).signum());
             flat.group.push(flat.groups);
         }
         flat.groups += 1;
@@ -410,6 +421,8 @@ pub fn fit(
     }
     flat.vehicles = renumber.len();
     let s = opts.scale_deg.to_radians();
+    // Every edge turned back by the vehicles' systematic turn towards VP1.
+    let back = -EDGE_TURN_DEG.to_radians();
     let ones = vec![1.0; flat.groups];
     let [lo_w, hi_w] = STRAIGHT_FOCAL_GRID_WIDTHS;
     let (lo, hi) = ((lo_w * width).ln(), (hi_w * width).ln());
@@ -421,7 +434,7 @@ pub fn fit(
             (-20..=20).map(move |j| [ln_f, roll0 + f64::from(j) * 0.5f64.to_radians()])
         })
         .collect();
-    let costs = par_map(&grid, |x| cost(&flat, &ones, vp1, pp, x, s));
+    let costs = par_map(&grid, |x| cost(&flat, &ones, vp1, pp, x, s, back));
     let mut best = (f64::INFINITY, [0.0, 0.0]);
     for (x, c) in grid.into_iter().zip(costs) {
         if c < best.0 {
@@ -430,7 +443,7 @@ pub fn fit(
     }
     let step0 = [0.05, 0.2f64.to_radians()];
     let x = nelder_mead(
-        |x| cost(&flat, &ones, vp1, pp, x, s),
+        |x| cost(&flat, &ones, vp1, pp, x, s, back),
         &best.1,
         &step0,
         FIT_ITERATIONS,
@@ -446,7 +459,7 @@ pub fn fit(
         .collect();
     let refits = par_map(&weights, |w| {
         nelder_mead(
-            |x| cost(&flat, w, vp1, pp, x, s),
+            |x| cost(&flat, w, vp1, pp, x, s, back),
             &x,
             &step0,
             REFIT_ITERATIONS,
@@ -458,17 +471,26 @@ pub fn fit(
         .iter()
         .map(|xb| line_angle_diff(xb[1] - x[1]).to_degrees())
         .collect();
-    let turned: Vec<f64> = par_map(&[EDGE_BIAS_DEG, -EDGE_BIAS_DEG], |t| {
-        let turn = t.to_radians();
-        nelder_mead(
-            |x| cost_turned(&flat, &ones, vp1, pp, x, s, turn),
+    // What the turn moves: refits with the edges turned back by a degree less and more
+    // (the focal length's gate is on this degree; the spreads scale it to the turn's own
+    // uncertainty).
+    let probe = 1f64.to_radians();
+    let turned: Vec<[f64; 2]> = par_map(&[back + probe, back - probe], |&turn| {
+        let xt = nelder_mead(
+            |x| cost(&flat, &ones, vp1, pp, x, s, turn),
             &x,
             &step0,
             REFIT_ITERATIONS,
         )
-        .x[0]
+        .x;
+        [xt[0], xt[1]]
     });
-    let focal_bias_log_spread = 0.5 * (turned[0] - turned[1]).abs();
+    let focal_bias_log_spread = 0.5 * (turned[0][0] - turned[1][0]).abs();
+    let roll_per_deg = 0.5
+        * line_angle_diff(turned[0][1] - turned[1][1])
+            .abs()
+            .to_degrees();
+    let roll_turn_sd_deg = roll_per_deg * EDGE_TURN_SD_DEG;
     let (h, u) = vp2_direction(vp1, pp, x[0], x[1]);
     let vp2 = vp1 + h / u;
     let focal_px = x[0].exp();
@@ -486,6 +508,7 @@ pub fn fit(
         edgelets: flat.point.len(),
         vehicles: flat.groups,
         roll_sd_deg,
+        roll_turn_sd_deg,
         focal_px_p16: p16,
         focal_px_p84: p84,
         roll_usable,

@@ -356,12 +356,16 @@ pub struct Evidence {
     /// whether or not they were used.
     pub edgelet_focal_px: Option<f64>,
     pub edgelet_roll_sd_deg: Option<f64>,
+    /// How far the uncertainty of the edges' systematic turn towards VP1
+    /// (`edge::EDGE_TURN_SD_DEG`) moves the edgelet fit's roll, degrees; the roll's spread
+    /// downstream is this and the bootstrap's in quadrature.
+    pub edgelet_roll_turn_sd_deg: Option<f64>,
     /// Half of `ln(p84 / p16)` of the edgelet fit's bootstrap focal lengths, and the distance
     /// of its VP2 from the principal point in image widths (the focal length's two gates).
     pub edgelet_focal_log_spread: Option<f64>,
     pub edgelet_vp2_widths: Option<f64>,
-    /// How far a systematic turn of the edges by `edge::EDGE_BIAS_DEG` moves the edgelet
-    /// fit's focal length (half the `ln f` difference; its third gate).
+    /// How far a systematic turn of the edges by 1° moves the edgelet fit's `ln f` (its third
+    /// gate; `edge::EdgeletFit::focal_bias_log_spread`).
     pub edgelet_focal_bias_log_spread: Option<f64>,
     /// How the vehicles' box sizes grow with their distance below the estimated horizon (the
     /// power of a log-log fit; 1 when they agree, see `super::sizes`); `None` with too few
@@ -637,7 +641,7 @@ pub fn aggregate_with_scene(
     let horizon_placed = curved_fit.is_some() || !road.road_curved;
     let roll_sd_deg = curved_fit
         .map(|c| c.roll_sd_deg)
-        .or(usable.map(|e| e.roll_sd_deg))
+        .or(usable.map(|e| e.roll_total_sd_deg()))
         .or_else(|| {
             samples
                 .as_ref()
@@ -701,6 +705,7 @@ pub fn aggregate_with_scene(
         evidence.edgelet_vehicles = e.vehicles;
         evidence.edgelet_focal_px = Some(e.focal_px);
         evidence.edgelet_roll_sd_deg = Some(e.roll_sd_deg);
+        evidence.edgelet_roll_turn_sd_deg = Some(e.roll_turn_sd_deg);
         evidence.edgelet_focal_log_spread = Some(e.focal_log_spread());
         evidence.edgelet_vp2_widths = Some((e.vp2 - pp).norm() / width);
         evidence.edgelet_focal_bias_log_spread = Some(e.focal_bias_log_spread);
@@ -759,7 +764,7 @@ pub fn aggregate_with_scene(
                 c.focal_px_p84,
             )),
             (None, Some(e)) => Some((
-                e.roll_sd_deg,
+                e.roll_total_sd_deg(),
                 evidence.focal_from_edgelets,
                 e.focal_px_p16,
                 e.focal_px_p84,
