@@ -122,8 +122,10 @@ pub const EDGE_TURN_DEG: f64 = 0.5;
 
 /// The uncertainty of [`EDGE_TURN_DEG`], degrees: what it moves the roll and `ln f` (measured
 /// by refits with the edges turned back by a degree less and more) is their systematic
-/// spread. It covers the renders' per-scene turns (0.20-0.62°) and the clean KITTI
-/// vehicles' (0.48°), not KITTI's occluded, truncated or small ones' (1.85°).
+/// spread. It covers the speed scenes' per-scene turns (0.20-0.62°), the clean KITTI
+/// vehicles' (0.48°) and, at its low end, the synthetic suite's sharper renders (about 0:
+/// the turn grows as the boxes shrink; docs/accuracy.md §26), not KITTI's occluded,
+/// truncated or small ones' (1.85°).
 pub const EDGE_TURN_SD_DEG: f64 = 0.5;
 
 impl Default for EdgeletFitOptions {
