@@ -47,6 +47,27 @@ def box_turn(edgelets, vp1, vp2):
     return grid[cost.index(min(cost))]
 
 
+ALPHA_BINS = [(0, 15), (15, 30), (30, 40), (40, 60), (60, 90)]
+
+
+def box_alpha(centre, vp1, vp2):
+    """The angle between the directions from `centre` to the two VPs, degrees in [0, 90]."""
+    x, y = centre
+    d1 = math.atan2(vp1[1] - y, vp1[0] - x)
+    d2 = math.atan2(vp2[1] - y, vp2[0] - x)
+    return abs(math.degrees(line_diff(d1 - d2)))
+
+
+def by_alpha(rows):
+    """'alpha lo-hi: median (n)' for each bin of ALPHA_BINS with boxes."""
+    out = []
+    for lo, hi in ALPHA_BINS:
+        t = [turn for turn, a in rows if lo <= a < hi]
+        if t:
+            out.append(f"{lo}-{hi}: {median(t):+.2f} ({len(t)})")
+    return "  ".join(out)
+
+
 def median(v):
     v = sorted(v)
     n = len(v)
@@ -74,11 +95,16 @@ def main():
                 print(f"{scene}: calibrate failed: {r.stderr.strip()[:200]}")
                 continue
         cam = json.load(open(os.path.join(d, "camera.json")))
-        turns = [t for it in json.load(open(veh))
-                 if (t := box_turn(it.get("edgelets") or [], cam["vp1"], cam["vp2"])) is not None]
-        everything += turns
+        rows = [(t, box_alpha(it["box_center"], cam["vp1"], cam["vp2"]))
+                for it in json.load(open(veh))
+                if (t := box_turn(it.get("edgelets") or [], cam["vp1"], cam["vp2"])) is not None]
+        everything += rows
+        turns = [t for t, _ in rows]
         print(f"{scene:24s} boxes {len(turns):5d}  median turn towards VP1 {median(turns):+.2f} deg")
-    print(f"{'all':24s} boxes {len(everything):5d}  median turn towards VP1 {median(everything):+.2f} deg")
+        print(f"{'':24s} by angle between the VPs' directions (deg): {by_alpha(rows)}")
+    turns = [t for t, _ in everything]
+    print(f"{'all':24s} boxes {len(turns):5d}  median turn towards VP1 {median(turns):+.2f} deg")
+    print(f"{'':24s} by angle between the VPs' directions (deg): {by_alpha(everything)}")
 
 
 if __name__ == "__main__":

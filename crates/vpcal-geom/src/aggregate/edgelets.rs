@@ -11,8 +11,9 @@
 //! the horizon through VP1 at angle `roll` that is orthogonal to VP1 for `f`. The fit
 //! minimises a Cauchy loss of the angles between the edgelets and the directions from them to
 //! VP2 (a grid, then Nelder-Mead), and a bootstrap over vehicles measures its spread. Every
-//! edge is first turned back by the vehicles' systematic turn towards VP1 ([`EDGE_TURN_DEG`]),
-//! and refits with that turn's uncertainty measure what it moves the roll and f.
+//! edge is first turned back by the vehicles' systematic turn towards VP1 ([`EDGE_TURN_DEG`]
+//! times [`edge_turn_share`], which falls as the edge and the direction to VP1 part), and
+//! refits with that turn's uncertainty measure what it moves the roll and f.
 //!
 //! Why: the bundled network's VP2 rays are right in the mean only on some scenes; its roll is
 //! pulled towards 0° (the aggregator's roll prior, and the network's own). On the synthetic
@@ -106,26 +107,40 @@ fn default_max_focal_bias_log_spread() -> f64 {
 }
 
 /// The systematic turn of the edges across vehicles towards the vehicle's length (the
-/// direction to VP1), degrees: rounded fronts and rears, wheel arches, reflections and
-/// shadows, and the edge filter's reach into the vehicle's other edges, turn the edges a
-/// little the same way on every vehicle, which no resampling of the vehicles reveals. Below
-/// the horizon and between the two VPs, "towards VP1" is the same way round for every
-/// vehicle, so the turn moves VP2 across the horizon (the roll) as much as along it (the
-/// focal length). The fit turns every edge back by this much. Size: the median signed VP2
-/// direction error (towards VP1 positive) of the per-vehicle edgelet fits is +0.48° on the 18
-/// clean real KITTI vehicles with a fit (`vpcal eval kitti --data
-/// $VPCAL_DATA/real/kitti_object --all`; +1.85° on 26 occluded, truncated or small ones), and
-/// the median of each box's robust fit of its edgelets' turn towards VP1 is +0.38° over 6,209
-/// boxes of the six synthetic speed scenes (per scene +0.20 to +0.62°; `scripts/edge_turn.py`,
-/// true boxes); rounded, 0.5°.
-pub const EDGE_TURN_DEG: f64 = 0.5;
+/// direction to VP1), degrees, where the two directions meet at a small angle: the edge
+/// filter's integration window (`sigma_t` 3 px) reaches from an edge across the vehicle into
+/// the edges along it near the corners where they meet, and mixes their orientations into
+/// one; the closer the two directions, the farther from the corner they stay within the
+/// window and still pass the coherence gate. Below the horizon and between the two VPs,
+/// "towards VP1" is the same way round for every vehicle, so the turn moves VP2 across the
+/// horizon (the roll) more than along it (the focal length). The fit turns every edge back
+/// by this much times [`edge_turn_share`] of the angle between the edge and the direction to
+/// VP1 at its place.
+///
+/// Measured per box (`scripts/edge_turn.py`, true boxes: each box's robust fit of its
+/// edgelets' turn towards VP1, binned by that angle), over the six synthetic speed scenes
+/// (6,209 boxes) and the synthetic suite rendered at `--supersample 3` (synth01, 03, 04, 10,
+/// 14): at 15-30° the median turns are +0.44 to +0.64° (speed scenes) and +0.52 to +0.69°
+/// (synth04), at 30-40° +0.22 and 0.00°, at 40-60° +0.14, +0.12, +0.18, -0.08 and -0.05°,
+/// above 60° +0.02 to +0.06°. Divided by the share, the median is about 0.7°. synth03's
+/// boxes at 15-25° do not turn (-0.04°), which the uncertainty covers. KITTI's labels are
+/// not exact enough to measure it: its clean vehicles' per-box turns spread over -5 to +6°.
+pub const EDGE_TURN_DEG: f64 = 0.7;
 
-/// The uncertainty of [`EDGE_TURN_DEG`], degrees: what it moves the roll and `ln f` (measured
-/// by refits with the edges turned back by a degree less and more) is their systematic
-/// spread. It covers the speed scenes' per-scene turns (0.20-0.62°), the clean KITTI
-/// vehicles' (0.48°) and, at its low end, the synthetic suite's sharper renders (about 0:
-/// the turn grows as the boxes shrink; docs/accuracy.md §26), not KITTI's occluded,
-/// truncated or small ones' (1.85°).
+/// The share of [`EDGE_TURN_DEG`] by which an edge meeting the direction to VP1 at `alpha`
+/// radians turns: `cos⁴ alpha`, 1 where the two directions coincide, 0.73 at 22.5°, 0.17 at
+/// 50° and below 0.01 beyond 75° (the measured turns of [`EDGE_TURN_DEG`]'s doc fall that
+/// way; the exact law of the window's mixing depends on the vehicles' shapes).
+pub fn edge_turn_share(alpha: f64) -> f64 {
+    alpha.cos().powi(4)
+}
+
+/// The uncertainty of the edges' turn, degrees: what it moves the roll (measured by refits
+/// with every edge turned back by a degree less and more than [`EDGE_TURN_DEG`] times its
+/// share) is the roll's systematic spread. It covers the per-scene turns of
+/// [`EDGE_TURN_DEG`]'s doc against the model (-0.2 to +0.2° at 40° and more, about ±0.3° at
+/// 15-30°, synth03's -0.5° there at 1 of it). Where VP2 is far, a turn of this size would
+/// move `ln f` further than the focal length's gate allows (`max_focal_bias_log_spread`).
 pub const EDGE_TURN_SD_DEG: f64 = 0.5;
 
 impl Default for EdgeletFitOptions {
@@ -219,7 +234,8 @@ pub struct EdgeletFit {
     pub roll_sd_deg: f64,
     /// How far the uncertainty of the edges' systematic turn ([`EDGE_TURN_SD_DEG`]) moves
     /// the roll, degrees: half the roll difference between the fits with the edges turned
-    /// back by [`EDGE_TURN_DEG`] ∓ 1°, per degree, times that uncertainty.
+    /// back by [`EDGE_TURN_DEG`] (times each edge's [`edge_turn_share`]) ∓ 1°, per degree,
+    /// times that uncertainty.
     pub roll_turn_sd_deg: f64,
     pub focal_px_p16: f64,
     pub focal_px_p84: f64,
@@ -298,6 +314,8 @@ pub(super) fn vp2_direction(vp1: Point2, pp: Point2, ln_f: f64, roll: f64) -> (P
 /// (`group`), and each box's physical vehicle (`vehicle_of_group`, numbered `0..vehicles`).
 struct Flat {
     point: Vec<Point2>,
+    /// Each edgelet's angle, turned back by the edges' systematic turn towards VP1
+    /// ([`EDGE_TURN_DEG`] times its [`edge_turn_share`]).
     angle: Vec<f64>,
     /// +1 where turning the edgelet counter-clockwise (a positive angle) turns it towards
     /// the direction to VP1 at its place, else -1.
@@ -309,8 +327,9 @@ struct Flat {
 }
 
 /// The fit's cost of `x = [ln f, roll]`: a Cauchy loss (scale `s`, radians) of the angles
-/// between the edgelets, each turned by `turn` radians towards the direction to VP1 at its
-/// place (away from it when `turn` is negative), and the directions from them to VP2.
+/// between the (turned back) edgelets, each turned by `turn` radians more towards the
+/// direction to VP1 at its place (away from it when `turn` is negative), and the directions
+/// from them to VP2.
 fn cost(flat: &Flat, gw: &[f64], vp1: Point2, pp: Point2, x: &[f64], s: f64, turn: f64) -> f64 {
     let (h, u) = vp2_direction(vp1, pp, x[0], x[1]);
     let mut c = 0.0;
@@ -410,10 +429,11 @@ pub fn fit(
         next += step;
         for (p, a) in v {
             let to_vp1 = vp1 - *p;
+            let alpha = line_angle_diff(to_vp1.y.atan2(to_vp1.x) - a);
+            let back = EDGE_TURN_DEG.to_radians() * edge_turn_share(alpha.abs());
             flat.point.push(*p);
-            flat.angle.push(*a);
-            flat.towards_vp1
-                .push(line_angle_diff(to_vp1.y.atan2(to_vp1.x) - a).signum());
+            flat.angle.push(a - back * alpha.signum());
+            flat.towards_vp1.push(alpha.signum());
             flat.group.push(flat.groups);
         }
         flat.groups += 1;
@@ -423,8 +443,6 @@ pub fn fit(
     }
     flat.vehicles = renumber.len();
     let s = opts.scale_deg.to_radians();
-    // Every edge turned back by the vehicles' systematic turn towards VP1.
-    let back = -EDGE_TURN_DEG.to_radians();
     let ones = vec![1.0; flat.groups];
     let [lo_w, hi_w] = STRAIGHT_FOCAL_GRID_WIDTHS;
     let (lo, hi) = ((lo_w * width).ln(), (hi_w * width).ln());
@@ -436,7 +454,7 @@ pub fn fit(
             (-20..=20).map(move |j| [ln_f, roll0 + f64::from(j) * 0.5f64.to_radians()])
         })
         .collect();
-    let costs = par_map(&grid, |x| cost(&flat, &ones, vp1, pp, x, s, back));
+    let costs = par_map(&grid, |x| cost(&flat, &ones, vp1, pp, x, s, 0.0));
     let mut best = (f64::INFINITY, [0.0, 0.0]);
     for (x, c) in grid.into_iter().zip(costs) {
         if c < best.0 {
@@ -445,7 +463,7 @@ pub fn fit(
     }
     let step0 = [0.05, 0.2f64.to_radians()];
     let x = nelder_mead(
-        |x| cost(&flat, &ones, vp1, pp, x, s, back),
+        |x| cost(&flat, &ones, vp1, pp, x, s, 0.0),
         &best.1,
         &step0,
         FIT_ITERATIONS,
@@ -461,7 +479,7 @@ pub fn fit(
         .collect();
     let refits = par_map(&weights, |w| {
         nelder_mead(
-            |x| cost(&flat, w, vp1, pp, x, s, back),
+            |x| cost(&flat, w, vp1, pp, x, s, 0.0),
             &x,
             &step0,
             REFIT_ITERATIONS,
@@ -473,11 +491,11 @@ pub fn fit(
         .iter()
         .map(|xb| line_angle_diff(xb[1] - x[1]).to_degrees())
         .collect();
-    // What the turn moves: refits with the edges turned back by a degree less and more
-    // (the focal length's gate is on this degree; the spreads scale it to the turn's own
+    // What a systematic turn moves: refits with every edge turned a degree more and less
+    // (the focal length's gate is on this degree; the roll's spread scales it to the turn's
     // uncertainty).
     let probe = 1f64.to_radians();
-    let turned: Vec<[f64; 2]> = par_map(&[back + probe, back - probe], |&turn| {
+    let turned: Vec<[f64; 2]> = par_map(&[-probe, probe], |&turn| {
         let xt = nelder_mead(
             |x| cost(&flat, &ones, vp1, pp, x, s, turn),
             &x,
@@ -670,7 +688,8 @@ impl CurvedFlat {
     /// `roll`; vehicle `g`'s VP1 is where its tangent meets the horizon, its VP2 the point of
     /// the horizon orthogonal to that VP1 for focal length f, and VP3 the vertical one. An
     /// edgelet within `ex1` of the direction to its VP1 is scored against it, any other
-    /// against the nearer of VP2 and VP3 (vertical edges would otherwise pull the fit).
+    /// against the nearer of VP2 (turned back by the edges' systematic turn, as in [`fit`])
+    /// and VP3 (vertical edges would otherwise pull the fit).
     fn cost(&self, gw: &[f64], pp: Point2, x: &[f64], s: f64, ex1: f64) -> f64 {
         let h = Point2::new(x[1].cos(), x[1].sin());
         let n = Point2::new(-h.y, h.x);
@@ -701,7 +720,10 @@ impl CurvedFlat {
                 } else {
                     let d2 = d1 * u + h;
                     let d3 = (pp - p) * k3 + dv;
-                    let r2 = line_angle_diff(ang - d2.y.atan2(d2.x)).abs();
+                    // An edge across the vehicle, turned back by the edges' systematic turn
+                    // towards its VP1 (as the straight fit's).
+                    let back = EDGE_TURN_DEG.to_radians() * edge_turn_share(r1.abs());
+                    let r2 = line_angle_diff(ang + back * r1.signum() - d2.y.atan2(d2.x)).abs();
                     let r3 = line_angle_diff(ang - d3.y.atan2(d3.x)).abs();
                     r2.min(r3)
                 } / s;
