@@ -120,8 +120,8 @@ fn default_max_focal_bias_log_spread() -> f64 {
 /// Measured per box (`scripts/edge_turn.py`, true boxes: each box's robust fit of its
 /// edgelets' turn towards VP1, binned by that angle), over the six synthetic speed scenes
 /// (6,209 boxes) and the synthetic suite rendered at `--supersample 3` (synth01, 03, 04, 10,
-/// 14): at 15-30° the median turns are +0.44 to +0.64° (speed scenes) and +0.52 to +0.69°
-/// (synth04), at 30-40° +0.22 and 0.00°, at 40-60° +0.14, +0.12, +0.18, -0.08 and -0.05°,
+/// 14): at 15-30° the median turns are +0.44 to +0.64° (speed scenes, in 5° bins; per scene
+/// +0.22 to +1.20°) and +0.52 to +0.69° (synth04), at 30-40° +0.22 and 0.00°, at 40-60° +0.14, +0.12, +0.18, -0.08 and -0.05°,
 /// above 60° +0.02 to +0.06°. Divided by the share, the median is about 0.7°. synth03's
 /// boxes at 15-25° do not turn (-0.04°), which the uncertainty covers. KITTI's labels are
 /// not exact enough to measure it: its clean vehicles' per-box turns spread over -5 to +6°.
@@ -137,10 +137,10 @@ pub fn edge_turn_share(alpha: f64) -> f64 {
 
 /// The uncertainty of the edges' turn, degrees: what it moves the roll (measured by refits
 /// with every edge turned back by a degree less and more than [`EDGE_TURN_DEG`] times its
-/// share) is the roll's systematic spread. It covers the per-scene turns of
-/// [`EDGE_TURN_DEG`]'s doc against the model (-0.2 to +0.2° at 40° and more, about ±0.3° at
-/// 15-30°, synth03's -0.5° there at 1 of it). Where VP2 is far, a turn of this size would
-/// move `ln f` further than the focal length's gate allows (`max_focal_bias_log_spread`).
+/// share) is the roll's systematic spread. It covers most per-scene turns of
+/// [`EDGE_TURN_DEG`]'s doc against the model: -0.2 to +0.2° at 40° and more, -0.3 to +0.1°
+/// at 15-30° (synth03's -0.5° at 1 of it), not highway_s2's +0.7° there. The focal length's
+/// gate (`max_focal_bias_log_spread`) is on a uniform turn of a degree.
 pub const EDGE_TURN_SD_DEG: f64 = 0.5;
 
 impl Default for EdgeletFitOptions {
