@@ -7,13 +7,13 @@ boxes and `--vehicles` (kept in OUT_DIR), then takes each box's edgelets that th
 would use against the true VPs (within 12 degrees of the direction to VP2, farther than 4
 from the direction to VP1) and fits one turn per vehicle box: the angle that minimises the
 Cauchy loss (scale 1 degree) of the edgelets' angles less the true directions to VP2, signed
-towards the direction to VP1 positive. Prints the median per scene and over all scenes:
-the measurement behind `vpcal_geom::aggregate::edgelets::EDGE_TURN_DEG` (with the KITTI
-vehicles' `vpcal eval kitti --all`).
+towards the direction to VP1 positive. Prints the median per scene and over all scenes, each
+also by the angle between the directions to VP1 and VP2 at the box's centre (the edge filter
+mixes the two directions more the closer they are): the measurement behind
+`vpcal_geom::aggregate::edgelets::EDGE_TURN_DEG` and `edge_turn_share`.
 
 Usage: scripts/edge_turn.py VPCAL SCENE_ROOT OUT_DIR [SCENE...]
 """
-import csv
 import glob
 import json
 import math

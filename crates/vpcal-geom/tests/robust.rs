@@ -522,7 +522,7 @@ fn vehicle_tracks_replace_scattered_biased_vp1_rays() {
 }
 
 /// Per vehicle: 20 edgelets inside its box pointing at the true VP2 (turned towards VP1 by
-/// the vehicles' `edgelets::EDGE_TURN_DEG` times its share; 0.5° noise), 10 at the true VP1 (the
+/// the vehicles' `edgelets::edge_turn`; 0.5° noise), 10 at the true VP1 (the
 /// vehicle's length; 0.5° noise) and 4 at random angles.
 fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Edgelet>> {
     let mut rng = Lcg(seed);
@@ -541,10 +541,7 @@ fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Ed
                     let to = |q: Point2| (q.y - p.y).atan2(q.x - p.x);
                     let angle = match k {
                         0..20 => {
-                            let alpha = line_angle_diff(to(vp1) - to(vp2));
-                            let turn = edgelets::EDGE_TURN_DEG.to_radians()
-                                * alpha.signum()
-                                * edgelets::edge_turn_share(alpha.abs());
+                            let turn = edgelets::edge_turn(line_angle_diff(to(vp1) - to(vp2)));
                             to(vp2) + turn + 0.5f64.to_radians() * rng.normal()
                         }
                         20..30 => to(vp1) + 0.5f64.to_radians() * rng.normal(),
@@ -698,7 +695,7 @@ proptest! {
 /// A road curving by 43° over 60 m (radius 80 m), two lanes, a rolled camera, and 80 cars on
 /// it. Each car's tangent points at its own VP1; its edgelets run across it (its VP2), along it
 /// (its VP1) or up (VP3), with 0.3° of noise; the edges across each car turned towards its
-/// VP1 as `edgelets::EDGE_TURN_DEG` says.
+/// VP1 as `edgelets::edge_turn` says.
 fn cars_on_a_curve() -> (Scene, Vec<(Tangent, Vec<Edgelet>)>) {
     let scene = Scene::new(1400.0, 0.35, 2f64.to_radians(), 0.3, 10.0);
     let radius = 80.0;
@@ -747,10 +744,8 @@ fn cars_on_a_curve() -> (Scene, Vec<(Tangent, Vec<Edgelet>)>) {
             if k < 20 {
                 // The edges across the car turn towards the direction to its own VP1.
                 let vp1 = scene.vp(d);
-                let alpha = line_angle_diff((vp1.y - p.y).atan2(vp1.x - p.x) - angle);
-                angle += edgelets::EDGE_TURN_DEG.to_radians()
-                    * alpha.signum()
-                    * edgelets::edge_turn_share(alpha.abs());
+                angle +=
+                    edgelets::edge_turn(line_angle_diff((vp1.y - p.y).atan2(vp1.x - p.x) - angle));
             }
             edgelets.push(Edgelet {
                 x: p.x,

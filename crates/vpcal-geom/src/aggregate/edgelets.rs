@@ -121,8 +121,8 @@ fn default_max_focal_bias_log_spread() -> f64 {
 /// edgelets' turn towards VP1, binned by that angle), over the six synthetic speed scenes
 /// (6,209 boxes) and the synthetic suite rendered at `--supersample 3` (synth01, 03, 04, 10,
 /// 14): at 15-30° the median turns are +0.44 to +0.64° (speed scenes, in 5° bins; per scene
-/// +0.22 to +1.20°) and +0.52 to +0.69° (synth04), at 30-40° +0.22 and 0.00°, at 40-60° +0.14, +0.12, +0.18, -0.08 and -0.05°,
-/// above 60° +0.02 to +0.06°. Divided by the share, the median is about 0.7°. synth03's
+/// +0.22 to +1.20°) and +0.52 to +0.69° (synth04), at 30-40° +0.22 and 0.00°, at 40-60°
+/// +0.14, +0.12, +0.18, -0.08 and -0.05°, above 60° +0.02 to +0.06°. Divided by the share, the median is about 0.7°. synth03's
 /// boxes at 15-25° do not turn (-0.04°), which the uncertainty covers. KITTI's labels are
 /// not exact enough to measure it: its clean vehicles' per-box turns spread over -5 to +6°.
 pub const EDGE_TURN_DEG: f64 = 0.7;
@@ -133,6 +133,14 @@ pub const EDGE_TURN_DEG: f64 = 0.7;
 /// way; the exact law of the window's mixing depends on the vehicles' shapes).
 pub fn edge_turn_share(alpha: f64) -> f64 {
     alpha.cos().powi(4)
+}
+
+/// The systematic turn (radians) of an edge whose angle to the direction to VP1 at its place
+/// is `alpha` (signed: positive where turning the edge counter-clockwise turns it towards that
+/// direction): [`EDGE_TURN_DEG`] times its [`edge_turn_share`], towards VP1. An edge is
+/// turned back by subtracting it.
+pub fn edge_turn(alpha: f64) -> f64 {
+    EDGE_TURN_DEG.to_radians() * edge_turn_share(alpha.abs()) * alpha.signum()
 }
 
 /// The uncertainty of the edges' turn, degrees: what it moves the roll (measured by refits
@@ -430,9 +438,8 @@ pub fn fit(
         for (p, a) in v {
             let to_vp1 = vp1 - *p;
             let alpha = line_angle_diff(to_vp1.y.atan2(to_vp1.x) - a);
-            let back = EDGE_TURN_DEG.to_radians() * edge_turn_share(alpha.abs());
             flat.point.push(*p);
-            flat.angle.push(a - back * alpha.signum());
+            flat.angle.push(a - edge_turn(alpha));
             flat.towards_vp1.push(alpha.signum());
             flat.group.push(flat.groups);
         }
@@ -721,9 +728,9 @@ impl CurvedFlat {
                     let d2 = d1 * u + h;
                     let d3 = (pp - p) * k3 + dv;
                     // An edge across the vehicle, turned back by the edges' systematic turn
-                    // towards its VP1 (as the straight fit's).
-                    let back = EDGE_TURN_DEG.to_radians() * edge_turn_share(r1.abs());
-                    let r2 = line_angle_diff(ang + back * r1.signum() - d2.y.atan2(d2.x)).abs();
+                    // towards its VP1 (as the straight fit's; `r1` is its angle from that
+                    // direction, the opposite sign of `edge_turn`'s).
+                    let r2 = line_angle_diff(ang - edge_turn(-r1) - d2.y.atan2(d2.x)).abs();
                     let r3 = line_angle_diff(ang - d3.y.atan2(d3.x)).abs();
                     r2.min(r3)
                 } / s;
