@@ -8,7 +8,7 @@ use vpcal_geom::aggregate::edgelets::{
     self, fit_curved, near_rays, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
 };
 use vpcal_geom::aggregate::focal::{self, focal_prior_range_widths, focal_widths, TRAFFIC_FOV_DEG};
-use vpcal_geom::aggregate::rays::{rays_focal_likelihood, rays_focal_posterior};
+use vpcal_geom::aggregate::rays::{rays_focal_likelihood, rays_focal_posterior, RaysRoll};
 use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
 use vpcal_geom::aggregate::tracks::Tangent;
 use vpcal_geom::aggregate::{line_angle_diff, VehicleVps};
@@ -557,6 +557,61 @@ fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Ed
                 .collect()
         })
         .collect()
+}
+
+#[test]
+fn the_rays_own_roll_is_weighed_against_the_physical_prior() {
+    // A camera rolled by 3° and a CNN-like network (VP2 points at 0.1-0.3 of their distance:
+    // untrusted), no edgelets: the rays place the horizon themselves, and the physical prior
+    // on its angle (level, 2°) pulls it towards level by their measured spread.
+    let opts = RobustOptions {
+        image_size: Some([1920.0, 1080.0]),
+        bootstrap: 5,
+        ..RobustOptions::default()
+    };
+    let scene = Scene::new(1100.0, 0.4, 3f64.to_radians(), 0.5, 8.0);
+    let vehicles = cloud_with(&scene, 300, 0.2, 11, (0.1, 0.3));
+    let r = aggregate(&vehicles, scene.pp, &opts).unwrap();
+    let ev = &r.evidence;
+    assert!(!ev.rays_trusted && !ev.roll_from_edgelets, "{ev:?}");
+    let truth = Calibration::from_vps(
+        scene.vp([0.0, 1.0, 0.0]),
+        scene.vp([1.0, 0.0, 0.0]),
+        scene.pp,
+    )
+    .unwrap()
+    .horizon
+    .angle()
+    .to_degrees();
+    let own = ev.rays_roll_own_deg.unwrap();
+    assert!(
+        (own - truth).abs() < 0.7,
+        "the rays' own roll {own}° for {truth}°"
+    );
+    let model = RaysRoll::of(ev.rays_scatter_deg.unwrap(), opts.roll_prior_sigma_deg).unwrap();
+    assert!((ev.rays_roll_sd_deg.unwrap() - model.sd_deg).abs() < 1e-12);
+    let roll = r.calibration.horizon.angle().to_degrees();
+    assert!((roll - model.share() * own).abs() < 1e-6, "{roll} vs {own}");
+    assert!(roll > 0.5 * own && roll < own, "{roll} vs {own}");
+    let sd = r.confidence.unwrap().horizon_angle_sd_deg;
+    assert!((sd - model.sd_after_deg()).abs() < 1e-12, "{sd}");
+    assert!(
+        (roll - truth).abs() < 2.0 * sd,
+        "{roll}° ± {sd} for {truth}°"
+    );
+}
+
+#[test]
+fn the_rays_roll_model_shrinks_by_precision() {
+    let m = RaysRoll::of(1.0, 2.0).unwrap();
+    assert!((m.sd_deg - 2.0).abs() < 1e-12 && (m.share() - 0.5).abs() < 1e-12);
+    assert!((m.roll(0.04) - 0.02).abs() < 1e-12);
+    assert!((m.sd_after_deg() - 2f64.sqrt()).abs() < 1e-12);
+    // Rays that scatter less than the floor are not taken to be more precise than it.
+    assert_eq!(RaysRoll::of(0.1, 2.0), RaysRoll::of(0.5, 2.0));
+    // Noisier rays weigh less, and nothing is left without a prior or a finite scatter.
+    assert!(RaysRoll::of(3.0, 2.0).unwrap().share() < m.share());
+    assert!(RaysRoll::of(f64::NAN, 2.0).is_none() && RaysRoll::of(1.0, 0.0).is_none());
 }
 
 #[test]

@@ -624,6 +624,14 @@ pub fn aggregate(
                     "edgelet_roll_turn_sd_deg".into(),
                     serde_json::json!(e.edgelet_roll_turn_sd_deg),
                 );
+                o.insert(
+                    "rays_roll_own_deg".into(),
+                    serde_json::json!(e.rays_roll_own_deg),
+                );
+                o.insert(
+                    "rays_roll_sd_deg".into(),
+                    serde_json::json!(e.rays_roll_sd_deg),
+                );
                 // The scene's vertical lines (`vpcal_geom::aggregate::verticals`).
                 o.insert("vertical_candidates".into(), e.vertical_candidates.into());
                 o.insert("vertical_supporting".into(), e.vertical_supporting.into());

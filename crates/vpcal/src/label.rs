@@ -18,7 +18,9 @@
 //! - **Gates** (a refusal names the first that failed): the camera calibrates; VP1 comes from
 //!   at least [`LabelSettings::min_track_lines`] straight tracks that agree to
 //!   [`LabelSettings::max_track_residual_deg`]; the road is not called curved; the horizon's
-//!   bootstrap spread is at most [`LabelSettings::max_horizon_sd_deg`]. The input must be
+//!   spread (`confidence.horizon_angle_sd_deg`: the edgelets', or the rays' roll under its
+//!   physical prior of 2°, which is always below this gate, so there the labels' weights
+//!   carry it) is at most [`LabelSettings::max_horizon_sd_deg`]. The input must be
 //!   consecutive frames (a video, or a folder with `--fps`): stills have no tracks.
 //! - **Cameras whose vehicles do not share one VP1** (curves, intersections, roads whose
 //!   straight tracks agree worse than the gate; refused above only for want of one VP1 shared
@@ -89,7 +91,8 @@ pub struct LabelSettings {
     pub min_track_lines: usize,
     /// The straight tracks must point at VP1 to this median angle, degrees.
     pub max_track_residual_deg: f64,
-    /// Largest bootstrap spread of the horizon's angle, degrees.
+    /// Largest spread of the horizon's angle (the calibration's `horizon_angle_sd_deg`),
+    /// degrees.
     pub max_horizon_sd_deg: f64,
     /// Boxes a vehicle track needs.
     pub min_track_boxes: usize,

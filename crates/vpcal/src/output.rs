@@ -439,6 +439,10 @@ pub fn aggregate_records(
                 })
                 .collect();
             set_vehicle_scale(&mut file, &boxes, (width, height), cal, agg)?;
+            // The camera's height and tilt, as `calibrate` checks them (no tracks here, so
+            // no speeds).
+            let camera_checks = crate::plausible::check_camera(&file);
+            file.replace_checks(crate::plausible::CAMERA_CHECK, camera_checks);
             file
         }
         Err(e) => CalibrationFile::not_calibrated(input, format!("{e:#}")),

@@ -66,7 +66,8 @@ pub(super) fn bootstrap(
         let pb = fit_vp1(vp1_lines.lines(), wv1, threshold, &mut unused, Some(q1))?;
         let vb = vp1_of(pb)?;
         let mb = Vp2Model { vp1: vb, ..*model };
-        let (vb, xb, _) = fit_camera(&mb, vp1_lines, wv1, w, Some(x));
+        let fit = fit_camera(&mb, vp1_lines, wv1, w, Some(x));
+        let (vb, xb) = (fit.vp1, fit.x);
         let vb = scene
             .and_then(|(edgelets, so)| scene_lines::refine_vp1(vb, edgelets, so))
             .map_or(vb, |f| f.vp1);

@@ -47,6 +47,12 @@ pub const CURVED_FOCAL_GRID_WIDTHS: [f64; 2] = [0.3, 10.0];
 /// the grid searches ±6°, and a fit that walks past it has found no consistent camera.
 pub const CURVED_ROLL_LIMIT_DEG: f64 = 8.0;
 
+/// The straight fit's grid spans the roll this far either side of the rays' (0.5° cells). A
+/// fit that ends within a cell of its edge has found no roll inside the grid (on garbage
+/// boxes the cost can be flat, and the bootstrap's refits then all stay where they start):
+/// its roll is not used.
+pub const STRAIGHT_ROLL_GRID_DEG: f64 = 10.0;
+
 /// Nelder-Mead budgets: a fit from the grid's best cell, and a bootstrap refit, which starts
 /// at the fit and moves little (both converge well within them on the suite's scenes).
 const FIT_ITERATIONS: usize = 300;
@@ -247,7 +253,8 @@ pub struct EdgeletFit {
     pub roll_turn_sd_deg: f64,
     pub focal_px_p16: f64,
     pub focal_px_p84: f64,
-    /// Whether the roll and the focal length pass the identifiability gates.
+    /// Whether the roll and the focal length pass the identifiability gates (the roll: its
+    /// spread, and a fit inside [`STRAIGHT_ROLL_GRID_DEG`]).
     pub roll_usable: bool,
     pub focal_usable: bool,
     /// How far a systematic turn of every edge by 1° moves `ln f`: half of the `ln f`
@@ -458,7 +465,12 @@ pub fn fit(
     let grid: Vec<[f64; 2]> = (0..32)
         .flat_map(|i| {
             let ln_f = lo + (hi - lo) * f64::from(i) / 31.0;
-            (-20..=20).map(move |j| [ln_f, roll0 + f64::from(j) * 0.5f64.to_radians()])
+            (-20..=20).map(move |j| {
+                [
+                    ln_f,
+                    roll0 + f64::from(j) * (STRAIGHT_ROLL_GRID_DEG / 20.0).to_radians(),
+                ]
+            })
         })
         .collect();
     let costs = par_map(&grid, |x| cost(&flat, &ones, vp1, pp, x, s, 0.0));
@@ -522,7 +534,9 @@ pub fn fit(
     let vp2 = vp1 + h / u;
     let focal_px = x[0].exp();
     let (p16, p84, roll_sd_deg) = bootstrap_spread(fs, &rolls);
-    let roll_usable = roll_sd_deg <= opts.max_roll_sd_deg;
+    let inside = line_angle_diff(x[1] - roll0).abs().to_degrees()
+        < STRAIGHT_ROLL_GRID_DEG * (1.0 - 1.0 / 20.0);
+    let roll_usable = roll_sd_deg <= opts.max_roll_sd_deg && inside;
     let focal_usable = roll_usable
         && 0.5 * (p84 / p16).ln() <= opts.max_focal_log_spread
         && focal_bias_log_spread <= opts.max_focal_bias_log_spread

@@ -7,14 +7,16 @@
 //! source in one of two ways:
 //! - **trusted** ([`fit_camera`]) where the VP2 *points* imply the focal length the rays alone
 //!   give (a network without the public CNNs' distance bias): VP1, `f` and `θ` are refined
-//!   jointly, the roll prior dropped and `δ` fixed at 0, and the bootstrap of that fit is the
-//!   cue. The loss is then Geman-McClure (bounded: true outliers add a constant); in the
+//!   jointly with `δ` fixed at 0, and the bootstrap of that fit is the cue. The loss is then Geman-McClure (bounded: true outliers add a constant); in the
 //!   biased regime it is Cauchy (its unbounded tail lets systematically deviating rays still
 //!   pull, which measured better on the real CNN outputs: 8.8 / 22 / 9.1 % vs 9.3 / 21 /
 //!   9.0 % pooled ratio error for the three public CNNs on BrnoCompSpeed 0-3);
 //! - **untrusted** ([`rays_focal_likelihood`]): the rays alone still place VP2 on a horizon,
 //!   off by an angle taken as [`RAY_SYSTEMATIC_PER_SCATTER`] times their scatter: a likelihood
-//!   of `f` ([`RaysFocal`]).
+//!   of `f` ([`RaysFocal`]). Their own roll (fitted with `f` held and `δ` under its prior)
+//!   is weighed against the physical prior on the horizon's angle ([`RaysRoll`]): the rays
+//!   barely see the roll (their number says nothing of their common error), so both are
+//!   weighed by their measured spreads.
 
 use super::edgelets as edge;
 use super::focal::{self, FocalSource, Likelihood};
@@ -56,8 +58,6 @@ pub(super) struct Vp2Model<'a> {
     pub fixed_bias: Option<f64>,
     /// When set, `ln f` is this value rather than a parameter (an assumed focal length).
     pub fixed_ln_f: Option<f64>,
-    /// Whether the roll prior applies.
-    pub roll_prior: bool,
 }
 
 impl Vp2Model<'_> {
@@ -82,7 +82,6 @@ impl Vp2Model<'_> {
 
     /// The cost with the predicted ray angles (from the centres towards VP2) given.
     fn cost_with(&self, x: &[f64], w: &[f64], predicted: &[f64]) -> f64 {
-        let roll = x[1];
         let bias = self.fixed_bias.unwrap_or(x[2]);
         let s = self.opts.ray_scale_deg.to_radians();
         let mut c = 0.0;
@@ -100,12 +99,8 @@ impl Vp2Model<'_> {
             };
         }
         let k = total * self.opts.prior_weight;
-        let sq = |v: f64, sd: f64| 0.5 * (v / sd) * (v / sd);
-        if self.roll_prior {
-            c += k * sq(roll.to_degrees(), self.opts.roll_prior_sigma_deg);
-        }
-        c += k * sq(bias.to_degrees(), self.opts.ray_bias_prior_sigma_deg);
-        c
+        let b = bias.to_degrees() / self.opts.ray_bias_prior_sigma_deg;
+        c + k * 0.5 * b * b
     }
 
     /// Coarse grid over (ln f, roll, bias) then Nelder-Mead.
@@ -116,19 +111,14 @@ impl Vp2Model<'_> {
                 let [lo_w, hi_w] = HORIZON_FOCAL_GRID_WIDTHS;
                 let lo = (lo_w * self.f0 / self.opts.focal_prior_ratio).max(1.0).ln();
                 let hi = (hi_w * self.f0 / self.opts.focal_prior_ratio).ln();
-                let roll_max = if self.roll_prior {
-                    (3.0 * self.opts.roll_prior_sigma_deg).min(10.0)
-                } else {
-                    10.0
-                }
-                .to_radians();
+                let roll_max = ROLL_GRID_DEG.to_radians();
                 let bias_max = (3.0 * self.opts.ray_bias_prior_sigma_deg)
                     .min(15.0)
                     .to_radians();
                 let (n_roll, n_bias) = if self.fixed_bias.is_some() {
                     (21, 1)
                 } else {
-                    (9, 13)
+                    (21, 13)
                 };
                 let mut best = (f64::INFINITY, [self.f0.ln(), 0.0, 0.0]);
                 let mut predicted = vec![0.0; self.prep.centre.len()];
@@ -220,6 +210,68 @@ pub const RAY_SYSTEMATIC_PER_SCATTER: f64 = 8.0;
 ///   widths) at 0.39-0.55; the rays' own fit then trades the horizon's roll for f. A common
 ///   error whose sign changes with the view is widened, not corrected.
 pub const RAY_MIN_SCATTER_DEG: f64 = 2.0;
+
+/// The error of the horizon's angle that the network's VP2 rays alone give (their own fit:
+/// the roll free, VP1 and `f` held, the ray bias under its prior), as a multiple of their
+/// scatter ([`RaysFocal::scatter_deg`], at least [`RAY_ROLL_MIN_SCATTER_DEG`]). The rays
+/// barely see the roll: turning the horizon about VP1 moves a far VP2 up or down, which
+/// turns every ray by nearly the same angle, as a common bias of the rays would. Measured
+/// on two sources (`docs/accuracy.md` §27):
+/// - BrnoCompSpeed sessions 0-3, the three public CNNs' VPout files against the reference
+///   cameras (`vpcal aggregate VPOUT --pp bcs --image-size 1920x1080`, 12 views each): the
+///   rays' own roll errs by an rms of 1.40° (median scatter 0.90°), 1.54° (1.63°) and 5.55°
+///   (2.56°); with twice the scatter as its standard deviation, 75, 73 and 67 % of the 36
+///   views lie within one posterior standard deviation ([`RaysRoll`]) of the truth.
+/// - The synthetic speed scene highway_s3, the bundled network (true boxes): the rays' own
+///   roll errs by 0.55° at a scatter of 0.67°.
+pub const RAY_ROLL_SD_PER_SCATTER: f64 = 2.0;
+
+/// The scatter below which the rays' roll error is not taken to shrink, degrees: the least
+/// the three public CNNs' rays (0.60°) and the bundled network's (0.51°, the speed scenes)
+/// scatter on any view measured.
+pub const RAY_ROLL_MIN_SCATTER_DEG: f64 = 0.5;
+
+/// The rays' horizon angle weighed against the physical prior on it (level, standard
+/// deviation `prior_sd_deg`): a normal likelihood of the rays' own roll with standard
+/// deviation [`RAY_ROLL_SD_PER_SCATTER`] times their scatter. The roll is the posterior's
+/// mean, the rays' own pulled towards level by [`RaysRoll::share`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RaysRoll {
+    /// The rays' own roll's standard deviation, degrees.
+    pub sd_deg: f64,
+    pub prior_sd_deg: f64,
+}
+
+impl RaysRoll {
+    /// The model for rays scattering `scatter_deg` around their own fit; `None` where the
+    /// scatter or the prior is not a positive number.
+    pub fn of(scatter_deg: f64, prior_sd_deg: f64) -> Option<RaysRoll> {
+        let sd_deg = RAY_ROLL_SD_PER_SCATTER * scatter_deg.max(RAY_ROLL_MIN_SCATTER_DEG);
+        let finite = scatter_deg.is_finite() && prior_sd_deg.is_finite();
+        (finite && prior_sd_deg > 0.0).then_some(RaysRoll {
+            sd_deg,
+            prior_sd_deg,
+        })
+    }
+
+    /// The rays' share of the roll: their precision over the posterior's.
+    pub fn share(&self) -> f64 {
+        let (r, p) = (self.sd_deg.powi(-2), self.prior_sd_deg.powi(-2));
+        r / (r + p)
+    }
+
+    /// The posterior's roll (radians) for the rays' own `roll` (radians).
+    pub fn roll(&self, roll: f64) -> f64 {
+        self.share() * roll
+    }
+
+    /// The posterior's standard deviation, degrees.
+    pub fn sd_after_deg(&self) -> f64 {
+        (self.sd_deg.powi(-2) + self.prior_sd_deg.powi(-2))
+            .sqrt()
+            .recip()
+    }
+}
 
 /// The focal length's distribution given the network's VP2 rays and the physical prior:
 /// [`rays_focal_likelihood`] within the prior uniform in `ln f` over `range_px`. Returns the
@@ -327,24 +379,10 @@ pub(super) fn rays_focal(model: &Vp2Model, w: &[f64], range_px: [f64; 2]) -> Ray
     let free = Vp2Model {
         fixed_bias: Some(0.0),
         fixed_ln_f: None,
-        roll_prior: false,
         ..*model
     };
     let x = free.fit(w, None);
-    let (h, u) = free.vp2(x[0], x[1]);
-    let (angles, weights): (Vec<f64>, Vec<f64>) = model
-        .prep
-        .centre
-        .iter()
-        .zip(&model.prep.angle2)
-        .zip(w)
-        .filter(|(_, w)| **w > 0.0)
-        .map(|((c, a), w)| {
-            let d = (model.vp1 - *c) * u + h;
-            (line_angle_diff(a - d.y.atan2(d.x)).abs().to_degrees(), *w)
-        })
-        .unzip();
-    let scatter = crate::metrics::weighted_median(&angles, &weights).unwrap_or(f64::NAN);
+    let scatter = scatter_deg(&free, x, w);
     let sd = RAY_SYSTEMATIC_PER_SCATTER * scatter.max(RAY_MIN_SCATTER_DEG);
     let support = focal::support(range_px);
     let likelihood = scatter
@@ -361,9 +399,40 @@ pub(super) fn rays_focal(model: &Vp2Model, w: &[f64], range_px: [f64; 2]) -> Ray
     }
 }
 
+/// The weighted median angle (degrees) of the rays (weights `w`) around the VP2 of `model`
+/// at `x` (`ln f`, roll); NaN without rays.
+fn scatter_deg(model: &Vp2Model, x: [f64; 3], w: &[f64]) -> f64 {
+    let (h, u) = model.vp2(x[0], x[1]);
+    let (angles, weights): (Vec<f64>, Vec<f64>) = model
+        .prep
+        .centre
+        .iter()
+        .zip(&model.prep.angle2)
+        .zip(w)
+        .filter(|(_, w)| **w > 0.0)
+        .map(|((c, a), w)| {
+            let d = (model.vp1 - *c) * u + h;
+            (line_angle_diff(a - d.y.atan2(d.x)).abs().to_degrees(), *w)
+        })
+        .unzip();
+    crate::metrics::weighted_median(&angles, &weights).unwrap_or(f64::NAN)
+}
+
+/// The camera the rays fit ([`fit_camera`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct RaysCamera {
+    /// VP1 (refined where the rays are trusted).
+    pub vp1: Point2,
+    /// `ln f`, the roll (radians) and the rays' bias (radians).
+    pub x: [f64; 3],
+    pub trusted: bool,
+    /// Where they are not trusted: their own roll (radians, before its prior) and its model.
+    pub own_roll: Option<(f64, RaysRoll)>,
+}
+
 /// Fit (ln f, roll, bias) for `model` with vehicle weights `w` (`w1` for the VP1 lines);
-/// returns VP1 (refined when the rays are trusted), the parameters, and whether the rays were
-/// trusted.
+/// returns VP1 (refined when the rays are trusted), the parameters, whether the rays were
+/// trusted and, where not, their own roll and its model ([`RaysCamera`]).
 ///
 /// When the VP2 *points* agree with what the VP2 rays alone say (a network without the
 /// distance bias of the public CNNs), the data are trusted: the focal and roll priors are
@@ -372,17 +441,17 @@ pub(super) fn rays_focal(model: &Vp2Model, w: &[f64], range_px: [f64; 2]) -> Ray
 /// focal length is held at `model.f0` (the prior's median, or the rays' posterior median
 /// once [`rays_focal`] measured it; not fitted here: with a free ray bias the rays' pull on
 /// `f` made it worse both on the public CNNs' BrnoCompSpeed outputs and on the synthetic
-/// demo) and the roll and ray bias are fitted under their priors.
+/// demo) and the roll is fitted freely, the ray bias under its prior (the roll's physical
+/// prior is weighed in afterwards: [`RaysRoll`]).
 pub(super) fn fit_camera(
     model: &Vp2Model,
     vp1_lines: &Vp1Lines,
     w1: &[f64],
     w: &[f64],
     start: Option<[f64; 3]>,
-) -> (Point2, [f64; 3], bool) {
+) -> RaysCamera {
     let unbiased = Vp2Model {
         fixed_bias: Some(0.0),
-        roll_prior: false,
         ..*model
     };
     let x_rays = unbiased.fit(w, start.map(|s| [s[0], s[1], 0.0]));
@@ -393,8 +462,24 @@ pub(super) fn fit_camera(
         fixed_ln_f: Some(model.f0.ln()),
         ..*model
     };
+    // Untrusted: f held, the roll free, then weighed against its prior.
+    let untrusted = || {
+        let mut x = assumed.fit(w, start);
+        let scatter = scatter_deg(&unbiased, x_rays, w);
+        let own_roll = RaysRoll::of(scatter, model.opts.roll_prior_sigma_deg).map(|rr| {
+            let own = x[1];
+            x[1] = rr.roll(own);
+            (own, rr)
+        });
+        RaysCamera {
+            vp1: model.vp1,
+            x,
+            trusted: false,
+            own_roll,
+        }
+    };
     if !trusted {
-        return (model.vp1, assumed.fit(w, start), false);
+        return untrusted();
     }
     let s1 = vp1_lines.threshold_deg.to_radians().sin();
     let q1 = from_sphere(homogeneous(model.vp1));
@@ -415,8 +500,13 @@ pub(super) fn fit_camera(
     )
     .x;
     match vp1_of(sphere([p[0], p[1]])) {
-        Some(vp1) => (vp1, [p[2], p[3], 0.0], true),
-        None => (model.vp1, assumed.fit(w, start), false),
+        Some(vp1) => RaysCamera {
+            vp1,
+            x: [p[2], p[3], 0.0],
+            trusted: true,
+            own_roll: None,
+        },
+        None => untrusted(),
     }
 }
 
@@ -424,6 +514,11 @@ pub(super) fn fit_camera(
 /// with the horizon jointly (4).
 const HORIZON_ITERATIONS: usize = 400;
 const JOINT_ITERATIONS: usize = 600;
+
+/// The horizon's angles the horizon model's grid spans, degrees either side of level: beyond
+/// any traffic camera's (the roll prior's sources,
+/// [`RobustOptions::roll_prior_sigma_deg`](super::robust::RobustOptions::roll_prior_sigma_deg), reach 4.9°).
+const ROLL_GRID_DEG: f64 = 10.0;
 
 /// Focal lengths the horizon model's grid spans, in image widths: 0.15 (a 147° view) to 15 (a
 /// 4° view), beyond the physical range of traffic cameras so that the VP2 evidence (or the

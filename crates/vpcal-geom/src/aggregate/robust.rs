@@ -29,7 +29,7 @@
 //!    sparse detections (every 10th frame) by 0.25-0.93°, and the rays are mostly kept: there
 //!    the tracks were 0.6-5° off the published DubskaCalib VP1.
 //! 4. **The network's VP2 rays** ([`super::rays`]): the horizon model (`f`, the roll `θ`
-//!    through VP1, a constant ray bias `δ`, weak Gaussian priors on `θ` and `δ`), with `f` held
+//!    through VP1, a constant ray bias `δ` under a weak Gaussian prior), with `f` held
 //!    at `focal_prior_ratio` x image width unless a source measures it. (Fitting `f` too
 //!    under a prior on `ln f` let the biased rays pull it: with the physical prior's spread of
 //!    0.59 the pooled ratio error on BrnoCompSpeed 0-3 rose from 9.5 / 12.2 / 8.8 % to 10.9 /
@@ -38,10 +38,13 @@
 //!    `consistency_log_ratio`) the rays are trusted and fit VP1, `f` and `θ` jointly; else
 //!    their likelihood of `f` is a cue (the systematic error of their VP2 taken as
 //!    [`RAY_SYSTEMATIC_PER_SCATTER`](super::rays::RAY_SYSTEMATIC_PER_SCATTER) times their
-//!    scatter).
+//!    scatter), and their own roll, free in the fit, is weighed against the physical prior
+//!    on the horizon's angle (`roll_prior_sigma_deg` around level) by its measured error
+//!    ([`RaysRoll`](super::rays::RaysRoll): twice their scatter).
 //! 5. **The edgelets** ([`super::edgelets`]): without tracks, VP1 is re-fitted to the edges
 //!    along the vehicles; the edges across them fit (f, roll) with VP1 fixed, the roll
-//!    replacing the rays' where its bootstrap spread is small and the focal length a cue
+//!    replacing the rays' where its bootstrap spread is small and its fit inside the grid
+//!    ([`STRAIGHT_ROLL_GRID_DEG`](super::edgelets::STRAIGHT_ROLL_GRID_DEG)), and the focal length a cue
 //!    where it is identified (its gates: `max_vp2_widths`, its spread, its turn). On a curved
 //!    road the curved-road fit takes each car's VP1 from its track's tangent.
 //! 6. **The scene's lines** ([`super::scene_lines`]): on a straight road, VP1 moves to where
@@ -104,7 +107,12 @@ pub struct RobustOptions {
     /// `ln f`); `focal_prior_ratio` should then be its geometric middle.
     #[serde(default)]
     pub focal_range_widths: Option<[f64; 2]>,
-    /// Standard deviation of the roll prior, degrees.
+    /// The physical prior on the horizon's angle: level, with this standard deviation
+    /// (degrees), against which the network's rays' own roll is weighed
+    /// ([`RaysRoll`](super::rays::RaysRoll)). Measured on real traffic cameras: the 12
+    /// BrnoCompSpeed reference cameras of sessions 0-3 (`camera_truth.json`) have an rms
+    /// horizon angle of 2.29° (0.62-4.88° in size), the 15 real clips whose horizon the
+    /// vehicles' edgelets set (`docs/accuracy.md` §27) 1.58° (up to 4.0°).
     pub roll_prior_sigma_deg: f64,
     /// Standard deviation of the prior on the CNN's VP2 ray bias, degrees.
     pub ray_bias_prior_sigma_deg: f64,
@@ -112,9 +120,8 @@ pub struct RobustOptions {
     pub ray_scale_deg: f64,
     /// Inlier threshold (and Cauchy scale) for VP1 lines, degrees.
     pub vp1_threshold_deg: f64,
-    /// Strength of the priors relative to the data: each prior term is multiplied by this
-    /// fraction of the total vehicle weight (for rays that scatter like `ray_noise_reference_deg`
-    /// around the fitted model; see there).
+    /// Strength of the rays' bias prior relative to the data: its term is multiplied by this
+    /// fraction of the total vehicle weight.
     pub prior_weight: f64,
     /// The VP2 points agree with the VP2 rays when their focal lengths differ by less than
     /// this in `|ln(f_points / f_rays)|`; the focal prior is then dropped.
@@ -214,7 +221,7 @@ impl Default for RobustOptions {
             image_size: None,
             focal_prior_ratio,
             focal_range_widths: None,
-            roll_prior_sigma_deg: 1.0,
+            roll_prior_sigma_deg: 2.0,
             ray_bias_prior_sigma_deg: 2.0,
             ray_scale_deg: 1.0,
             vp1_threshold_deg: 2.0,
@@ -360,6 +367,14 @@ pub struct Evidence {
     /// (`edge::EDGE_TURN_SD_DEG`) moves the edgelet fit's roll, degrees; the roll's spread
     /// downstream is this and the bootstrap's in quadrature.
     pub edgelet_roll_turn_sd_deg: Option<f64>,
+    /// Where the untrusted rays placed the horizon: their own roll (degrees, before the
+    /// physical prior on it pulled it towards level) and its standard deviation
+    /// ([`RaysRoll`](super::rays::RaysRoll)); the roll is `roll_deg` unless the edgelets or
+    /// the curved-road fit set it.
+    #[serde(default)]
+    pub rays_roll_own_deg: Option<f64>,
+    #[serde(default)]
+    pub rays_roll_sd_deg: Option<f64>,
     /// Half of `ln(p84 / p16)` of the edgelet fit's bootstrap focal lengths, and the distance
     /// of its VP2 from the principal point in image widths (the focal length's two gates).
     pub edgelet_focal_log_spread: Option<f64>,
@@ -573,11 +588,18 @@ pub fn aggregate_with_scene(
         f0: opts.focal_prior_ratio * width,
         fixed_bias: None,
         fixed_ln_f: None,
-        roll_prior: true,
     };
     let lines = &located.lines;
-    let (vp1, mut x, rays_trusted) = fit_camera(&model, lines, &lines.weight, &prep.weight, None);
+    let fit = fit_camera(&model, lines, &lines.weight, &prep.weight, None);
+    let (vp1, mut x, rays_trusted) = (fit.vp1, fit.x, fit.trusted);
     evidence.rays_trusted = rays_trusted;
+    // Untrusted, the rays' own roll is weighed against the physical prior on the horizon's
+    // angle (`RaysRoll`).
+    let rays_roll = fit.own_roll.map(|(own, rr)| {
+        evidence.rays_roll_own_deg = Some(own.to_degrees());
+        evidence.rays_roll_sd_deg = Some(rr.sd_deg);
+        rr
+    });
     // The edges inside the vehicles' boxes (`super::edgelets`), and the scene's lines along
     // the road (`super::scene_lines`), move VP1.
     let boxes = box_edgelets(pairs, edgelets, &vehicles.0, opts.min_score);
@@ -637,11 +659,14 @@ pub fn aggregate_with_scene(
     // straight down, where f cannot be observed).
     let trusted = rays_trusted.then(|| trusted_rays(x[0].exp(), samples.as_ref()));
     // The scene's vertical lines need only the horizon: VP1 on it and its roll, with the
-    // roll's spread (the edgelets' where they set it, else the bootstrap's).
+    // roll's spread (the edgelets' where they set it, the rays' posterior's where they did,
+    // else the bootstrap's).
     let horizon_placed = curved_fit.is_some() || !road.road_curved;
+    let rays_roll_sd = rays_roll.map(|r| r.sd_after_deg());
     let roll_sd_deg = curved_fit
         .map(|c| c.roll_sd_deg)
         .or(usable.map(|e| e.roll_total_sd_deg()))
+        .or(rays_roll_sd)
         .or_else(|| {
             samples
                 .as_ref()
@@ -716,7 +741,8 @@ pub fn aggregate_with_scene(
     evidence.curved_focal = carried("curved_edgelets");
     evidence.curved_vehicles = curved_fit.map_or(0, |c| c.vehicles);
     // Where f moved off the value the VP2 model held, the roll and the rays' bias are
-    // refitted with f held there (unless the edgelets set the roll).
+    // refitted with f held there (unless the edgelets set the roll), the roll weighed
+    // against its prior again.
     let model = Vp2Model {
         f0: focal.focal_px,
         ..model
@@ -727,6 +753,10 @@ pub fn aggregate_with_scene(
             ..model
         }
         .fit(&prep.weight, Some([focal.focal_px.ln(), x[1], x[2]]));
+        if let Some(rr) = rays_roll {
+            evidence.rays_roll_own_deg = Some(x[1].to_degrees());
+            x[1] = rr.roll(x[1]);
+        }
     }
     x[0] = focal.focal_px.ln();
     let (h, u) = model.vp2(x[0], x[1]);
@@ -771,7 +801,7 @@ pub fn aggregate_with_scene(
             )),
             (None, None) => None,
         };
-        confidence(&b, &model, &prep, &calibration, edges)
+        confidence(&b, &model, &prep, &calibration, edges, rays_roll_sd)
     });
     Ok(RobustResult {
         calibration,
@@ -924,28 +954,31 @@ fn horizon_sd_deg(b: &Samples, a0_deg: f64) -> f64 {
 }
 
 /// The estimate's spread from the bootstrap's resamples `b`; `edges`: where an edgelet fit
-/// set the roll, its roll's spread, whether it carried f, and its focal percentiles.
+/// set the roll, its roll's spread, whether it carried f, and its focal percentiles;
+/// `rays_roll_sd`: where the rays' roll was weighed against its prior, the posterior's
+/// spread (degrees), the horizon's spread unless the edgelets set it.
 fn confidence(
     b: &Samples,
     model: &Vp2Model,
     prep: &Prepared,
     calibration: &Calibration,
     edges: Option<(f64, bool, f64, f64)>,
+    rays_roll_sd: Option<f64>,
 ) -> Option<Confidence> {
     if b.focal_px.is_empty() {
         return None;
     }
     let data_only = Vp2Model {
         fixed_bias: Some(0.0),
-        roll_prior: false,
         ..*model
     }
     .fit(&prep.weight, None)[0]
         .exp();
-    let horizon_sd = edges.map_or_else(
-        || horizon_sd_deg(b, calibration.horizon.angle().to_degrees()),
-        |e| e.0,
-    );
+    let horizon_sd = match (edges, rays_roll_sd) {
+        (Some(e), _) => e.0,
+        (None, Some(sd)) => sd,
+        (None, None) => horizon_sd_deg(b, calibration.horizon.angle().to_degrees()),
+    };
     // Where f is held (untrusted rays), all of this bootstrap's resamples agree.
     let (p16, p84) = match edges {
         Some((_, true, p16, p84)) => (p16, p84),
