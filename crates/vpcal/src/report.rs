@@ -969,7 +969,15 @@ fn horizon_section(file: &CalibrationFile) -> String {
     rows.push(("VP2 (across the road)", pt(file.vp2)));
     rows.push(("VP3 (vertical)", pt(file.vp3)));
     rows.push(("principal point", pt(file.pp)));
-    if ev_bool(file, "roll_from_edgelets") {
+    if ev_bool(file, "curved_fit") {
+        rows.push((
+            "roll from",
+            format!(
+                "the curved-road fit ({} vehicles' track tangents and edgelets)",
+                ev_u64(file, "curved_vehicles").unwrap_or(0)
+            ),
+        ));
+    } else if ev_bool(file, "roll_from_edgelets") {
         rows.push((
             "roll from",
             format!(
@@ -979,13 +987,15 @@ fn horizon_section(file: &CalibrationFile) -> String {
             ),
         ));
     } else if file.evidence.is_some() {
-        rows.push((
-            "roll from",
-            format!(
-                "the network's VP2 rays ({} vehicles)",
-                ev_u64(file, "vp2_inliers").unwrap_or(0)
-            ),
-        ));
+        let rays = format!(
+            "the network's VP2 rays ({} vehicles)",
+            ev_u64(file, "vp2_inliers").unwrap_or(0)
+        );
+        let from = match ev_f64(file, "rays_roll_own_deg") {
+            Some(own) => format!("{rays}, their own {own:.2}° pulled towards level by its prior"),
+            None => rays,
+        };
+        rows.push(("roll from", from));
     }
     let rows: Vec<(&str, String)> = rows.into_iter().map(|(k, v)| (k, escape(&v))).collect();
     format!(

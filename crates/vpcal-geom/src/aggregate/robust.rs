@@ -359,6 +359,9 @@ pub struct Evidence {
     /// fit carried the focal length in its posterior.
     pub roll_from_edgelets: bool,
     pub focal_from_edgelets: bool,
+    /// The straight edgelet fit's own roll, degrees, whether or not it was used.
+    #[serde(default)]
+    pub edgelet_roll_deg: Option<f64>,
     /// The edgelet fit's focal length (px) and the bootstrap spread of its roll (degrees),
     /// whether or not they were used.
     pub edgelet_focal_px: Option<f64>,
@@ -730,6 +733,7 @@ pub fn aggregate_with_scene(
         evidence.edgelet_vehicles = e.vehicles;
         evidence.edgelet_focal_px = Some(e.focal_px);
         evidence.edgelet_roll_sd_deg = Some(e.roll_sd_deg);
+        evidence.edgelet_roll_deg = Some(e.roll.to_degrees());
         evidence.edgelet_roll_turn_sd_deg = Some(e.roll_turn_sd_deg);
         evidence.edgelet_focal_log_spread = Some(e.focal_log_spread());
         evidence.edgelet_vp2_widths = Some((e.vp2 - pp).norm() / width);
