@@ -73,6 +73,10 @@ impl Scene {
             self.pp.y + self.f * c[1] / c[2],
         )
     }
+    /// The true camera: VP1 along the road, VP2 across it.
+    fn truth(&self) -> Calibration {
+        Calibration::from_vps(self.vp([0.0, 1.0, 0.0]), self.vp([1.0, 0.0, 0.0]), self.pp).unwrap()
+    }
 }
 
 /// Tiny deterministic generator for the test's noise.
@@ -163,12 +167,7 @@ fn check(scene: &Scene, vehicles: &[VehicleVps], f_tol: f64, angle_tol_deg: f64)
         ..RobustOptions::default()
     };
     let r = aggregate(vehicles, scene.pp, &opts).unwrap();
-    let truth = Calibration::from_vps(
-        scene.vp([0.0, 1.0, 0.0]),
-        scene.vp([1.0, 0.0, 0.0]),
-        scene.pp,
-    )
-    .unwrap();
+    let truth = scene.truth();
     let f_err = (r.calibration.focal_px - scene.f).abs() / scene.f;
     assert!(
         f_err < f_tol,
@@ -574,15 +573,7 @@ fn the_rays_own_roll_is_weighed_against_the_physical_prior() {
     let r = aggregate(&vehicles, scene.pp, &opts).unwrap();
     let ev = &r.evidence;
     assert!(!ev.rays_trusted && !ev.roll_from_edgelets, "{ev:?}");
-    let truth = Calibration::from_vps(
-        scene.vp([0.0, 1.0, 0.0]),
-        scene.vp([1.0, 0.0, 0.0]),
-        scene.pp,
-    )
-    .unwrap()
-    .horizon
-    .angle()
-    .to_degrees();
+    let truth = scene.truth().horizon.angle().to_degrees();
     let own = ev.rays_roll_own_deg.unwrap();
     assert!(
         (own - truth).abs() < 0.7,
@@ -622,13 +613,7 @@ fn edgelets_give_the_roll_and_a_near_vp2s_focal_length() {
         ..RobustOptions::default()
     };
     let horizon_error = |scene: &Scene, c: &Calibration| {
-        let truth = Calibration::from_vps(
-            scene.vp([0.0, 1.0, 0.0]),
-            scene.vp([1.0, 0.0, 0.0]),
-            scene.pp,
-        )
-        .unwrap();
-        (c.horizon.angle() - truth.horizon.angle())
+        (c.horizon.angle() - scene.truth().horizon.angle())
             .to_degrees()
             .abs()
     };
@@ -824,12 +809,7 @@ fn cars_on_a_curve() -> (Scene, Vec<(Tangent, Vec<Edgelet>)>) {
 /// How far `fit` is from the scene's true camera: horizon angle (degrees), the horizon's
 /// height at the principal point's column (pixels), relative focal length error.
 fn curved_fit_errors(scene: &Scene, fit: &CurvedFit) -> (f64, f64, f64) {
-    let truth = Calibration::from_vps(
-        scene.vp([0.0, 1.0, 0.0]),
-        scene.vp([1.0, 0.0, 0.0]),
-        scene.pp,
-    )
-    .unwrap();
+    let truth = scene.truth();
     let est = Calibration::from_vps(fit.vp1, fit.vp2, scene.pp).unwrap();
     let angle = line_deg(est.horizon.angle() - truth.horizon.angle());
     // Where the horizon crosses the image's vertical centre line.

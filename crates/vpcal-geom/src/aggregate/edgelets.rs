@@ -47,11 +47,13 @@ pub const CURVED_FOCAL_GRID_WIDTHS: [f64; 2] = [0.3, 10.0];
 /// the grid searches ±6°, and a fit that walks past it has found no consistent camera.
 pub const CURVED_ROLL_LIMIT_DEG: f64 = 8.0;
 
-/// The straight fit's grid spans the roll this far either side of the rays' (0.5° cells). A
-/// fit that ends within a cell of its edge has found no roll inside the grid (on garbage
-/// boxes the cost can be flat, and the bootstrap's refits then all stay where they start):
-/// its roll is not used.
+/// The straight fit's grid spans the roll this far either side of the rays' (in
+/// [`STRAIGHT_ROLL_GRID_CELLS`] cells each side). A fit that ends within a cell of its edge
+/// has found no roll inside the grid (on garbage boxes the cost can be flat, and the
+/// bootstrap's refits then all stay where they start): its roll is not used.
 pub const STRAIGHT_ROLL_GRID_DEG: f64 = 10.0;
+/// The straight fit's roll cells either side of the rays' roll (0.5° each).
+const STRAIGHT_ROLL_GRID_CELLS: i32 = 20;
 
 /// Nelder-Mead budgets: a fit from the grid's best cell, and a bootstrap refit, which starts
 /// at the fit and moves little (both converge well within them on the suite's scenes).
@@ -128,8 +130,8 @@ fn default_max_focal_bias_log_spread() -> f64 {
 /// (6,209 boxes) and the synthetic suite rendered at `--supersample 3` (synth01, 03, 04, 10,
 /// 14): at 15-30° the median turns are +0.44 to +0.64° (speed scenes, in 5° bins; per scene
 /// +0.22 to +1.20°) and +0.52 to +0.69° (synth04), at 30-40° +0.22 and 0.00°, at 40-60°
-/// +0.14, +0.12, +0.18, -0.08 and -0.05°, above 60° +0.02 to +0.06°. Divided by the share, the median is about 0.7°. synth03's
-/// boxes at 15-25° do not turn (-0.04°), which the uncertainty covers. KITTI's labels are
+/// +0.14, +0.12, +0.18, -0.08 and -0.05°, above 60° +0.02 to +0.06°. Divided by the share,
+/// the median is about 0.7°. synth03's boxes at 15-25° do not turn (-0.04°), which the uncertainty covers. KITTI's labels are
 /// not exact enough to measure it: its clean vehicles' per-box turns spread over -5 to +6°.
 pub const EDGE_TURN_DEG: f64 = 0.7;
 
@@ -462,15 +464,12 @@ pub fn fit(
     let (lo, hi) = ((lo_w * width).ln(), (hi_w * width).ln());
     // The grid's and the bootstrap's fits are independent: they run spread over the cores,
     // each the same as one after another.
+    let roll_cell = (STRAIGHT_ROLL_GRID_DEG / f64::from(STRAIGHT_ROLL_GRID_CELLS)).to_radians();
     let grid: Vec<[f64; 2]> = (0..32)
         .flat_map(|i| {
             let ln_f = lo + (hi - lo) * f64::from(i) / 31.0;
-            (-20..=20).map(move |j| {
-                [
-                    ln_f,
-                    roll0 + f64::from(j) * (STRAIGHT_ROLL_GRID_DEG / 20.0).to_radians(),
-                ]
-            })
+            (-STRAIGHT_ROLL_GRID_CELLS..=STRAIGHT_ROLL_GRID_CELLS)
+                .map(move |j| [ln_f, roll0 + f64::from(j) * roll_cell])
         })
         .collect();
     let costs = par_map(&grid, |x| cost(&flat, &ones, vp1, pp, x, s, 0.0));
@@ -534,8 +533,8 @@ pub fn fit(
     let vp2 = vp1 + h / u;
     let focal_px = x[0].exp();
     let (p16, p84, roll_sd_deg) = bootstrap_spread(fs, &rolls);
-    let inside = line_angle_diff(x[1] - roll0).abs().to_degrees()
-        < STRAIGHT_ROLL_GRID_DEG * (1.0 - 1.0 / 20.0);
+    let inside =
+        line_angle_diff(x[1] - roll0).abs() < STRAIGHT_ROLL_GRID_DEG.to_radians() - roll_cell;
     let roll_usable = roll_sd_deg <= opts.max_roll_sd_deg && inside;
     let focal_usable = roll_usable
         && 0.5 * (p84 / p16).ln() <= opts.max_focal_log_spread

@@ -7,8 +7,8 @@
 //! source in one of two ways:
 //! - **trusted** ([`fit_camera`]) where the VP2 *points* imply the focal length the rays alone
 //!   give (a network without the public CNNs' distance bias): VP1, `f` and `θ` are refined
-//!   jointly with `δ` fixed at 0, and the bootstrap of that fit is the cue. The loss is then Geman-McClure (bounded: true outliers add a constant); in the
-//!   biased regime it is Cauchy (its unbounded tail lets systematically deviating rays still
+//!   jointly with `δ` fixed at 0, and the bootstrap of that fit is the cue. The loss is then
+//!   Geman-McClure (bounded: true outliers add a constant); in the biased regime it is Cauchy (its unbounded tail lets systematically deviating rays still
 //!   pull, which measured better on the real CNN outputs: 8.8 / 22 / 9.1 % vs 9.3 / 21 /
 //!   9.0 % pooled ratio error for the three public CNNs on BrnoCompSpeed 0-3);
 //! - **untrusted** ([`rays_focal_likelihood`]): the rays alone still place VP2 on a horizon,
@@ -438,9 +438,8 @@ pub(super) struct RaysCamera {
 /// trusted and, where not, their own roll and its model ([`RaysCamera`]).
 ///
 /// When the VP2 *points* agree with what the VP2 rays alone say (a network without the
-/// distance bias of the public CNNs), the data are trusted: the focal and roll priors are
-/// dropped, the ray bias is fixed at zero, and VP1, f and the roll are refined jointly on the
-/// VP1 lines and VP2 rays. Real CNNs that put VP2 far too close fail this check; then the
+/// distance bias of the public CNNs), the data are trusted: the ray bias is fixed at zero and
+/// VP1, f and the roll are refined jointly, without priors, on the VP1 lines and VP2 rays. Real CNNs that put VP2 far too close fail this check; then the
 /// focal length is held at `model.f0` (the prior's median, or the rays' posterior median
 /// once [`rays_focal`] measured it; not fitted here: with a free ray bias the rays' pull on
 /// `f` made it worse both on the public CNNs' BrnoCompSpeed outputs and on the synthetic
@@ -519,8 +518,8 @@ const HORIZON_ITERATIONS: usize = 400;
 const JOINT_ITERATIONS: usize = 600;
 
 /// The horizon's angles the horizon model's grid spans, degrees either side of level: beyond
-/// any traffic camera's (the roll prior's sources,
-/// [`RobustOptions::roll_prior_sigma_deg`](super::robust::RobustOptions::roll_prior_sigma_deg), reach 4.9°).
+/// any traffic camera's (the roll prior's sources reach 4.9°:
+/// [`RobustOptions::roll_prior_sigma_deg`](super::robust::RobustOptions::roll_prior_sigma_deg)).
 const ROLL_GRID_DEG: f64 = 10.0;
 
 /// Focal lengths the horizon model's grid spans, in image widths: 0.15 (a 147° view) to 15 (a

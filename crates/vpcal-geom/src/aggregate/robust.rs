@@ -44,9 +44,10 @@
 //! 5. **The edgelets** ([`super::edgelets`]): without tracks, VP1 is re-fitted to the edges
 //!    along the vehicles; the edges across them fit (f, roll) with VP1 fixed, the roll
 //!    replacing the rays' where its bootstrap spread is small and its fit inside the grid
-//!    ([`STRAIGHT_ROLL_GRID_DEG`](super::edgelets::STRAIGHT_ROLL_GRID_DEG)), and the focal length a cue
-//!    where it is identified (its gates: `max_vp2_widths`, its spread, its turn). On a curved
-//!    road the curved-road fit takes each car's VP1 from its track's tangent.
+//!    ([`STRAIGHT_ROLL_GRID_DEG`](super::edgelets::STRAIGHT_ROLL_GRID_DEG)), and the focal
+//!    length a cue where it is identified (its gates: `max_vp2_widths`, its spread, its
+//!    turn). On a curved road the curved-road fit takes each car's VP1 from its track's
+//!    tangent.
 //! 6. **The scene's lines** ([`super::scene_lines`]): on a straight road, VP1 moves to where
 //!    the background's lines along the road meet while the vehicles' VP1 lines still agree
 //!    (`scene_max_extra_deg`).
