@@ -579,7 +579,9 @@ fn the_rays_own_roll_is_weighed_against_the_physical_prior() {
         (own - truth).abs() < 0.7,
         "the rays' own roll {own}° for {truth}°"
     );
-    let model = RaysRoll::of(ev.rays_scatter_deg.unwrap(), opts.roll_prior_sigma_deg).unwrap();
+    let model = RaysRoll::of(ev.rays_scatter_deg.unwrap(), opts.roll_prior_sigma_deg)
+        .unwrap()
+        .with_sampling(ev.rays_roll_sampling_sd_deg.unwrap());
     assert!((ev.rays_roll_sd_deg.unwrap() - model.sd_deg).abs() < 1e-12);
     let roll = r.calibration.horizon.angle().to_degrees();
     assert!((roll - model.share() * own).abs() < 1e-6, "{roll} vs {own}");
@@ -589,6 +591,47 @@ fn the_rays_own_roll_is_weighed_against_the_physical_prior() {
     assert!(
         (roll - truth).abs() < 2.0 * sd,
         "{roll}° ± {sd} for {truth}°"
+    );
+}
+
+#[test]
+fn a_loosely_placed_vp1_widens_the_rays_roll() {
+    // Few vehicles whose VP1 directions scatter by 8°, VP2 near: VP1 lands hundreds of pixels
+    // off and moves between the bootstrap's resamples, and the rays' horizon, which runs
+    // through it, turns with it. That spread joins the rays' roll error: the roll is pulled
+    // further towards level, and its spread covers an error the rays' scatter alone hides.
+    let opts = RobustOptions {
+        image_size: Some([1920.0, 1080.0]),
+        bootstrap: 30,
+        ..RobustOptions::default()
+    };
+    let scene = Scene::new(1700.0, 0.4, 3f64.to_radians(), 0.9, 8.0);
+    let mut rng = Lcg(17);
+    let mut vehicles = cloud_with(&scene, 60, 0.0, 5, (0.1, 0.3));
+    for v in &mut vehicles {
+        let c = v.box_px.unwrap().center();
+        v.vp1 = fake_vp(c, v.vp1, 8.0 * rng.normal(), 1.0);
+    }
+    let r = aggregate(&vehicles, scene.pp, &opts).unwrap();
+    let ev = &r.evidence;
+    assert!(!ev.rays_trusted && !ev.roll_from_edgelets, "{ev:?}");
+    let alone = RaysRoll::of(ev.rays_scatter_deg.unwrap(), opts.roll_prior_sigma_deg).unwrap();
+    let spread = ev.rays_roll_sampling_sd_deg.unwrap();
+    let model = alone.with_sampling(spread);
+    assert!(spread > alone.sd_deg, "{spread} against {}", alone.sd_deg);
+    assert!((ev.rays_roll_sd_deg.unwrap() - model.sd_deg).abs() < 1e-12);
+    let own = ev.rays_roll_own_deg.unwrap();
+    let roll = r.calibration.horizon.angle().to_degrees();
+    assert!((roll - model.share() * own).abs() < 1e-6, "{roll} vs {own}");
+    let sd = r.confidence.unwrap().horizon_angle_sd_deg;
+    assert!((sd - model.sd_after_deg()).abs() < 1e-12);
+    // The truth, in posterior standard deviations: with the spread, and without it.
+    let truth = scene.truth().horizon.angle().to_degrees();
+    let z = (roll - truth).abs() / sd;
+    let z_alone = (alone.roll(own) - truth).abs() / alone.sd_after_deg();
+    assert!(
+        z < 2.5 && z < 0.6 * z_alone,
+        "{roll}° ± {sd} for {truth}° ({z} against {z_alone})"
     );
 }
 
@@ -603,6 +646,9 @@ fn the_rays_roll_model_shrinks_by_precision() {
     // Noisier rays weigh less, and nothing is left without a prior or a finite scatter.
     assert!(RaysRoll::of(3.0, 2.0).unwrap().share() < m.share());
     assert!(RaysRoll::of(f64::NAN, 2.0).is_none() && RaysRoll::of(1.0, 0.0).is_none());
+    // A sampling spread adds in quadrature; none measured leaves the model as it is.
+    assert!((m.with_sampling(1.5).sd_deg - 2.5).abs() < 1e-12);
+    assert_eq!(m.with_sampling(f64::NAN), m);
 }
 
 #[test]

@@ -636,6 +636,10 @@ pub fn aggregate(
                     "rays_roll_sd_deg".into(),
                     serde_json::json!(e.rays_roll_sd_deg),
                 );
+                o.insert(
+                    "rays_roll_sampling_sd_deg".into(),
+                    serde_json::json!(e.rays_roll_sampling_sd_deg),
+                );
                 // The scene's vertical lines (`vpcal_geom::aggregate::verticals`).
                 o.insert("vertical_candidates".into(), e.vertical_candidates.into());
                 o.insert("vertical_supporting".into(), e.vertical_supporting.into());

@@ -233,8 +233,14 @@ pub const MIN_LANE_DENSITY: f64 = 1.2;
 /// 1.5-3 m apart) leave dips of 10-30 %, which are noise, not lanes.
 pub const LANE_VALLEY_SHARE: f64 = 0.5;
 
+/// How far from the supported positions' median a position may lie and still count towards
+/// the lanes' density, metres. The widest roads (2 x 8 lanes with shoulders and a median) are
+/// under 100 m across; a position farther off is a bad contact point (near the horizon a pixel
+/// spans kilometres), and the density's grid must not stretch to it.
+pub const LANE_SEARCH_HALF_WIDTH_M: f64 = 250.0;
+
 /// The lane of each lateral position (metres; NaN gets none): the modes of the density of
-/// the positions marked in `support` (a Gaussian kernel of [`LANE_BANDWIDTH_M`]) that hold at
+/// the positions marked in `support` (within [`LANE_SEARCH_HALF_WIDTH_M`] of their median) (a Gaussian kernel of [`LANE_BANDWIDTH_M`]) that hold at
 /// least a tenth of the highest mode's density and [`MIN_LANE_DENSITY`] and stand out
 /// ([`LANE_VALLEY_SHARE`]), merged when closer than [`MIN_LANE_SPACING_M`] (the denser one
 /// stays), and the supported positions at least that far from every mode and every other
@@ -246,6 +252,11 @@ pub fn cluster_lanes(lateral_m: &[f64], support: &[bool]) -> Vec<Option<usize>> 
         .zip(support)
         .filter(|(v, s)| **s && v.is_finite())
         .map(|(v, _)| *v)
+        .collect();
+    let middle = vpcal_geom::solve::median(&finite).unwrap_or(0.0);
+    let finite: Vec<f64> = finite
+        .into_iter()
+        .filter(|v| (v - middle).abs() <= LANE_SEARCH_HALF_WIDTH_M)
         .collect();
     let (Some(lo), Some(hi)) = (
         finite.iter().copied().reduce(f64::min),
@@ -1026,6 +1037,13 @@ mod tests {
         let lanes = cluster_lanes(&beyond, &[true; 61]);
         assert_eq!(lanes[60], Some(4));
         assert_eq!(lanes[..60], cluster_lanes(&lateral, &[true; 60])[..]);
+        // Contact points near the horizon, kilometres (or more) off: no lane, and the lanes
+        // of the others as without them (the density's grid does not stretch to them).
+        let mut far = lateral.clone();
+        far.extend([1e9, -1e300, f64::MAX]);
+        let lanes = cluster_lanes(&far, &[true; 63]);
+        assert_eq!(lanes[..60], cluster_lanes(&lateral, &[true; 60])[..]);
+        assert_eq!(lanes[60..], [None, None, None]);
         // Positions spread evenly over 28 m, as a road frame that does not fit the road
         // spreads them: the density's ripples are no lanes, and no position is a lane alone.
         let spread: Vec<f64> = (0..40)

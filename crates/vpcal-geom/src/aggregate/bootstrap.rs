@@ -15,6 +15,9 @@ pub(super) struct Samples {
     pub horizon_deg: Vec<f64>,
     pub vp1_x: Vec<f64>,
     pub vp1_y: Vec<f64>,
+    /// Where the rays are not trusted, their own roll in each resample (degrees, before its
+    /// prior: [`RaysRoll`](super::rays::RaysRoll)).
+    pub rays_roll_own_deg: Vec<f64>,
 }
 
 /// Refit VP1 and the VP2 model (`x` the start) on `resamples` Poisson resamplings of the
@@ -37,6 +40,7 @@ pub(super) fn bootstrap(
         horizon_deg: vec![],
         vp1_x: vec![],
         vp1_y: vec![],
+        rays_roll_own_deg: vec![],
     };
     let q1 = from_sphere(p1);
     let scaled =
@@ -73,14 +77,16 @@ pub(super) fn bootstrap(
             .map_or(vb, |f| f.vp1);
         let mb = Vp2Model { vp1: vb, ..*model };
         let (hb, ub) = mb.vp2(xb[0], xb[1]);
-        Some((vb, vb + hb / ub, xb[0].exp()))
+        let own = fit.own_roll.map(|(own, _)| own.to_degrees());
+        Some((vb, vb + hb / ub, xb[0].exp(), own))
     });
-    for (vb, vp2b, focal) in refits.into_iter().flatten() {
+    for (vb, vp2b, focal, own) in refits.into_iter().flatten() {
         out.focal_px.push(focal);
         out.horizon_deg
             .push((vp2b.y - vb.y).atan2(vp2b.x - vb.x).to_degrees());
         out.vp1_x.push(vb.x);
         out.vp1_y.push(vb.y);
+        out.rays_roll_own_deg.extend(own);
     }
     out
 }

@@ -257,6 +257,21 @@ impl RaysRoll {
         })
     }
 
+    /// The model with the own roll's sampling spread `sampling_sd_deg` (its spread over the
+    /// bootstrap's resamples of the vehicles, each with VP1 refitted) added in quadrature:
+    /// the horizon runs through VP1, so where VP1 is placed loosely the rays' horizon turns
+    /// with it, which their scatter around one fit does not see. Unchanged where the spread
+    /// is not a finite number.
+    pub fn with_sampling(self, sampling_sd_deg: f64) -> RaysRoll {
+        if !sampling_sd_deg.is_finite() {
+            return self;
+        }
+        RaysRoll {
+            sd_deg: self.sd_deg.hypot(sampling_sd_deg),
+            ..self
+        }
+    }
+
     /// The rays' share of the roll: their precision over the posterior's.
     pub fn share(&self) -> f64 {
         let (r, p) = (self.sd_deg.powi(-2), self.prior_sd_deg.powi(-2));

@@ -379,6 +379,11 @@ pub struct Evidence {
     pub rays_roll_own_deg: Option<f64>,
     #[serde(default)]
     pub rays_roll_sd_deg: Option<f64>,
+    /// The part of `rays_roll_sd_deg` from the own roll's spread over the bootstrap's
+    /// resamples (half their 16th-84th percentile range, degrees): VP1 placed loosely turns
+    /// the rays' horizon with it.
+    #[serde(default)]
+    pub rays_roll_sampling_sd_deg: Option<f64>,
     /// Half of `ln(p84 / p16)` of the edgelet fit's bootstrap focal lengths, and the distance
     /// of its VP2 from the principal point in image widths (the focal length's two gates).
     pub edgelet_focal_log_spread: Option<f64>,
@@ -657,6 +662,23 @@ pub fn aggregate_with_scene(
         let (p1, n) = (located.p1, opts.bootstrap);
         bootstrap(&model, &prep, lines, p1, x, scene, n, &mut rng)
     });
+    // The rays' own roll moves with the vehicles drawn and with VP1, through which their
+    // horizon runs: its spread over the resamples joins its error model, and where the rays
+    // set the roll it is weighed against the prior again.
+    let rays_roll = rays_roll.map(|rr| {
+        let spread = samples
+            .as_ref()
+            .map(|b| half_p16_p84(&b.rays_roll_own_deg))
+            .filter(|s| s.is_finite());
+        evidence.rays_roll_sampling_sd_deg = spread;
+        let rr = spread.map_or(rr, |s| rr.with_sampling(s));
+        evidence.rays_roll_sd_deg = Some(rr.sd_deg);
+        rr
+    });
+    let roll_from_rays = usable.is_none() && curved_fit.is_none();
+    if let (Some(rr), Some(own), true) = (rays_roll, evidence.rays_roll_own_deg, roll_from_rays) {
+        x[1] = rr.roll(own.to_radians());
+    }
     // Each cue where its model holds: on a curved road only the curved fit (every car has
     // its own VP2, so neither the rays nor the straight edgelet fit apply); the rays and the
     // edges across the vehicles not where those edges are parallel in the image (a view
@@ -767,6 +789,17 @@ pub fn aggregate_with_scene(
     let (h, u) = model.vp2(x[0], x[1]);
     let calibration = Calibration::from_vps(vp1, vp1 + h / u, pp)
         .map_err(|e| not_enough(format!("the estimate is not a valid camera: {e}")))?;
+    // Vanishing points billions of pixels away (lines parallel in the image: a view straight
+    // down) hold the focal length only to rounding: such a camera is not measured.
+    if (calibration.focal_px / focal.focal_px - 1.0).abs() > FOCAL_ROUNDING_TOLERANCE {
+        return Err(not_enough(format!(
+            "the vanishing points lie too far out to place the camera (VP1 {:.3e} px from \
+             the principal point, VP2 {:.3e} px: the lines along and across the road are \
+             parallel in the image, as in a view straight down)",
+            (vp1 - pp).norm(),
+            (calibration.vp2 - pp).norm()
+        )));
+    }
     // The vehicles stand below the horizon and grow away from it (`super::sizes`).
     evidence.size_slope = sizes::check_horizon(
         &full.centre,
@@ -818,6 +851,11 @@ pub fn aggregate_with_scene(
         track_lines: road.straight,
     })
 }
+
+/// How far the focal length of the camera built from VP1 and VP2 may differ from the one
+/// fitted, relative: in exact arithmetic they are equal; only vanishing points so far out that
+/// their coordinates' rounding swamps the focal length's square part them.
+const FOCAL_ROUNDING_TOLERANCE: f64 = 1e-6;
 
 /// Why the evidence gives no camera.
 fn not_enough(message: impl Into<String>) -> AggregateError {
@@ -949,6 +987,15 @@ fn trusted_rays(focal_px: f64, samples: Option<&Samples>) -> focal::Measured {
 
 /// The standard deviation of the resamples' horizon angles, degrees, measured as line angles
 /// around `a0_deg` (angles near ±180° wrap).
+/// Half the range between the 16th and 84th percentiles of `v` (a standard deviation that
+/// a few resamples in another valley do not decide); NaN with fewer than two values.
+fn half_p16_p84(v: &[f64]) -> f64 {
+    if v.len() < 2 {
+        return f64::NAN;
+    }
+    0.5 * (percentile(v.to_vec(), 84.0) - percentile(v.to_vec(), 16.0))
+}
+
 fn horizon_sd_deg(b: &Samples, a0_deg: f64) -> f64 {
     let angles: Vec<f64> = b
         .horizon_deg

@@ -55,8 +55,8 @@ pub struct PreviewArgs {
     /// Seed of the sample choice and the augmentation.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Enlargement of each crop in the sheet.
-    #[arg(long, default_value_t = 2)]
+    /// Enlargement of each crop in the sheet (1-16).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
     pub scale: u32,
     /// Output PNG.
     #[arg(short = 'o', long)]

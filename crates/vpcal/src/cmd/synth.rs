@@ -161,11 +161,12 @@ pub struct SheetArgs {
     /// Number of crops shown.
     #[arg(long, default_value_t = 36)]
     pub count: usize,
-    /// Crops per row.
-    #[arg(long, default_value_t = 6)]
+    /// Crops per row (1-100).
+    #[arg(long, default_value_t = 6,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100))]
     pub cols: usize,
-    /// Tile size in pixels.
-    #[arg(long, default_value_t = 220)]
+    /// Tile size in pixels (16-2048).
+    #[arg(long, default_value_t = 220, value_parser = clap::value_parser!(u32).range(16..=2048))]
     pub cell: u32,
     /// Seed of the crops drawn.
     #[arg(long, default_value_t = 0)]
