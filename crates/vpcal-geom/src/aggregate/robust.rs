@@ -81,7 +81,7 @@ use super::focal::{
     self, focal_prior_range_widths, physical_focal_prior, FocalPosterior, FocalSource,
 };
 use super::line_angle_diff;
-use super::rays::{fit_camera, rays_focal, RayOptions, Vp2Model};
+use super::rays::{fit_camera, rays_focal, RayOptions, RaysRoll, Vp2Model};
 use super::scene_lines::{self, SceneLineOptions, SceneVp1};
 use super::sizes;
 use super::tracks::{self, CurveTest, RoadTracks, TrackLine, TrackOptions};
@@ -675,8 +675,8 @@ pub fn aggregate_with_scene(
         evidence.rays_roll_sd_deg = Some(rr.sd_deg);
         rr
     });
-    let roll_from_rays = usable.is_none() && curved_fit.is_none();
-    if let (Some(rr), Some(own), true) = (rays_roll, evidence.rays_roll_own_deg, roll_from_rays) {
+    let roll_from = RollFrom::of(curved_fit, usable, rays_roll);
+    if let (RollFrom::Rays(rr), Some(own)) = (roll_from, evidence.rays_roll_own_deg) {
         x[1] = rr.roll(own.to_radians());
     }
     // Each cue where its model holds: on a curved road only the curved fit (every car has
@@ -688,18 +688,7 @@ pub fn aggregate_with_scene(
     // roll's spread (the edgelets' where they set it, the rays' posterior's where they did,
     // else the bootstrap's).
     let horizon_placed = curved_fit.is_some() || !road.road_curved;
-    let rays_roll_sd = rays_roll.map(|r| r.sd_after_deg());
-    let roll_sd_deg = curved_fit
-        .map(|c| c.roll_sd_deg)
-        .or(usable.map(|e| e.roll_total_sd_deg()))
-        .or(rays_roll_sd)
-        .or_else(|| {
-            samples
-                .as_ref()
-                .filter(|b| b.horizon_deg.len() > 1)
-                .map(|b| horizon_sd_deg(b, x[1].to_degrees()))
-        })
-        .unwrap_or(0.0);
+    let roll_sd_deg = roll_from.sd_deg(samples.as_ref(), x[1].to_degrees());
     let vertical_fit = opts
         .verticals
         .as_ref()
@@ -774,16 +763,14 @@ pub fn aggregate_with_scene(
         f0: focal.focal_px,
         ..model
     };
-    if focal.measured && !rays_trusted && usable.is_none() && curved_fit.is_none() {
+    if let (true, RollFrom::Rays(rr)) = (focal.measured, roll_from) {
         x = Vp2Model {
             fixed_ln_f: Some(focal.focal_px.ln()),
             ..model
         }
         .fit(&prep.weight, Some([focal.focal_px.ln(), x[1], x[2]]));
-        if let Some(rr) = rays_roll {
-            evidence.rays_roll_own_deg = Some(x[1].to_degrees());
-            x[1] = rr.roll(x[1]);
-        }
+        evidence.rays_roll_own_deg = Some(x[1].to_degrees());
+        x[1] = rr.roll(x[1]);
     }
     x[0] = focal.focal_px.ln();
     let (h, u) = model.vp2(x[0], x[1]);
@@ -822,24 +809,16 @@ pub fn aggregate_with_scene(
         })
         .count();
     let confidence = samples.and_then(|b| {
-        // Where the edgelets set the roll, their own bootstrap is its spread; where an
-        // edgelet fit carried f, its bootstrap is f's.
-        let edges = match (curved_fit, usable) {
-            (Some(c), _) => Some((
-                c.roll_sd_deg,
-                evidence.curved_focal,
-                c.focal_px_p16,
-                c.focal_px_p84,
-            )),
-            (None, Some(e)) => Some((
-                e.roll_total_sd_deg(),
-                evidence.focal_from_edgelets,
-                e.focal_px_p16,
-                e.focal_px_p84,
-            )),
-            (None, None) => None,
+        // Where an edgelet fit carried f, its bootstrap is f's.
+        let edge_focal = match roll_from {
+            RollFrom::Curved(c) if evidence.curved_focal => Some([c.focal_px_p16, c.focal_px_p84]),
+            RollFrom::Edgelets(e) if evidence.focal_from_edgelets => {
+                Some([e.focal_px_p16, e.focal_px_p84])
+            }
+            _ => None,
         };
-        confidence(&b, &model, &prep, &calibration, edges, rays_roll_sd)
+        let horizon_sd = roll_from.sd_deg(Some(&b), calibration.horizon.angle().to_degrees());
+        confidence(&b, &model, &prep, horizon_sd, edge_focal)
     });
     Ok(RobustResult {
         calibration,
@@ -853,9 +832,49 @@ pub fn aggregate_with_scene(
 }
 
 /// How far the focal length of the camera built from VP1 and VP2 may differ from the one
-/// fitted, relative: in exact arithmetic they are equal; only vanishing points so far out that
-/// their coordinates' rounding swamps the focal length's square part them.
+/// fitted, relative: in exact arithmetic they are equal, and they part only where the
+/// vanishing points lie so far out that rounding their coordinates swamps the focal length.
 const FOCAL_ROUNDING_TOLERANCE: f64 = 1e-6;
+
+/// What set the horizon's roll, in order of precedence: the curved-road fit, the straight
+/// edgelet fit where its roll is usable, the untrusted rays' own roll under its physical
+/// prior, else the rays' joint fit (trusted) with the bootstrap's spread.
+#[derive(Debug, Clone, Copy)]
+enum RollFrom {
+    Curved(CurvedFit),
+    Edgelets(edge::EdgeletFit),
+    Rays(RaysRoll),
+    Bootstrap,
+}
+
+impl RollFrom {
+    fn of(
+        curved: Option<CurvedFit>,
+        edges: Option<edge::EdgeletFit>,
+        rays: Option<RaysRoll>,
+    ) -> RollFrom {
+        match (curved, edges, rays) {
+            (Some(c), _, _) => RollFrom::Curved(c),
+            (None, Some(e), _) => RollFrom::Edgelets(e),
+            (None, None, Some(r)) => RollFrom::Rays(r),
+            (None, None, None) => RollFrom::Bootstrap,
+        }
+    }
+
+    /// The roll's standard deviation, degrees: the fit's own (the edgelets' with their turn,
+    /// the rays' posterior), or the spread of the resamples `samples` around `roll_deg` (0
+    /// with fewer than two).
+    fn sd_deg(&self, samples: Option<&Samples>, roll_deg: f64) -> f64 {
+        match self {
+            RollFrom::Curved(c) => c.roll_sd_deg,
+            RollFrom::Edgelets(e) => e.roll_total_sd_deg(),
+            RollFrom::Rays(r) => r.sd_after_deg(),
+            RollFrom::Bootstrap => samples
+                .filter(|b| b.horizon_deg.len() > 1)
+                .map_or(0.0, |b| horizon_sd_deg(b, roll_deg)),
+        }
+    }
+}
 
 /// Why the evidence gives no camera.
 fn not_enough(message: impl Into<String>) -> AggregateError {
@@ -1005,17 +1024,15 @@ fn horizon_sd_deg(b: &Samples, a0_deg: f64) -> f64 {
     sd(&angles)
 }
 
-/// The estimate's spread from the bootstrap's resamples `b`; `edges`: where an edgelet fit
-/// set the roll, its roll's spread, whether it carried f, and its focal percentiles;
-/// `rays_roll_sd`: where the rays' roll was weighed against its prior, the posterior's
-/// spread (degrees), the horizon's spread unless the edgelets set it.
+/// The estimate's spread from the bootstrap's resamples `b`; `horizon_sd`: the roll's
+/// ([`RollFrom::sd_deg`]); `edge_focal`: where an edgelet fit carried f, its bootstrap's 16th
+/// and 84th percentiles of f.
 fn confidence(
     b: &Samples,
     model: &Vp2Model,
     prep: &Prepared,
-    calibration: &Calibration,
-    edges: Option<(f64, bool, f64, f64)>,
-    rays_roll_sd: Option<f64>,
+    horizon_sd: f64,
+    edge_focal: Option<[f64; 2]>,
 ) -> Option<Confidence> {
     if b.focal_px.is_empty() {
         return None;
@@ -1026,19 +1043,13 @@ fn confidence(
     }
     .fit(&prep.weight, None)[0]
         .exp();
-    let horizon_sd = match (edges, rays_roll_sd) {
-        (Some(e), _) => e.0,
-        (None, Some(sd)) => sd,
-        (None, None) => horizon_sd_deg(b, calibration.horizon.angle().to_degrees()),
-    };
     // Where f is held (untrusted rays), all of this bootstrap's resamples agree.
-    let (p16, p84) = match edges {
-        Some((_, true, p16, p84)) => (p16, p84),
-        _ => (
+    let [p16, p84] = edge_focal.unwrap_or_else(|| {
+        [
             percentile(b.focal_px.clone(), 16.0),
             percentile(b.focal_px.clone(), 84.0),
-        ),
-    };
+        ]
+    });
     Some(Confidence {
         focal_px_p16: p16,
         focal_px_p84: p84,
