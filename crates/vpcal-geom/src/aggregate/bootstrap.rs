@@ -1,7 +1,7 @@
 //! The spread of the camera under resampling of the physical vehicles: VP1 and the horizon
 //! model refitted on Poisson(1) reweightings (one count per vehicle, shared by its boxes).
 
-use super::edgelets::Edgelet;
+use super::edgelets::{self, BoxEdgelets, Edgelet, EdgeletFitOptions};
 use super::rays::{fit_camera, Vp2Model};
 use super::scene_lines::{self, SceneLineOptions};
 use super::vehicles::Prepared;
@@ -22,8 +22,10 @@ pub(super) struct Samples {
 
 /// Refit VP1 and the VP2 model (`x` the start) on `resamples` Poisson resamplings of the
 /// physical vehicles (one count per vehicle, shared by its boxes: [`vehicle_units`](super::vehicles::vehicle_units); track
-/// lines get one count per track). Where the scene's lines placed VP1 (`scene`), each
-/// resample's VP1 is moved by them again: they do not change with the vehicles.
+/// lines get one count per track). Where the edgelets along the vehicles moved VP1 (`edges`),
+/// each resample's VP1 is moved by those of the vehicles it drew (each box as many times as
+/// its vehicle's count); where the scene's lines placed VP1 (`scene`), it is moved by them
+/// again: they do not change with the vehicles.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn bootstrap(
     model: &Vp2Model,
@@ -31,6 +33,7 @@ pub(super) fn bootstrap(
     vp1_lines: &Vp1Lines,
     p1: [f64; 3],
     x: [f64; 3],
+    edges: Option<(&[BoxEdgelets], &EdgeletFitOptions)>,
     scene: Option<(&[Edgelet], &SceneLineOptions)>,
     resamples: usize,
     rng: &mut SplitMix,
@@ -47,7 +50,7 @@ pub(super) fn bootstrap(
         |w: &[f64], c: &[f64]| -> Vec<f64> { w.iter().zip(c).map(|(a, c)| a * c).collect() };
     // The draws in order, then the refits (independent of each other) over the cores: the
     // same resamples as drawing and fitting one after another.
-    let weights: Vec<(Vec<f64>, Vec<f64>)> = (0..resamples)
+    let weights: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..resamples)
         .map(|_| {
             let draws: Vec<f64> = (0..prep.units).map(|_| rng.poisson1()).collect();
             let counts: Vec<f64> = prep.unit.iter().map(|&u| draws[u]).collect();
@@ -60,10 +63,10 @@ pub(super) fn bootstrap(
             } else {
                 scaled(&vp1_lines.weight, &counts)
             };
-            (w, wv1)
+            (w, wv1, draws)
         })
         .collect();
-    let refits = crate::solve::par_map(&weights, |(w, wv1)| {
+    let refits = crate::solve::par_map(&weights, |(w, wv1, draws)| {
         let threshold = vp1_lines.threshold_deg;
         // With a start, the VP1 fit draws no random numbers.
         let mut unused = SplitMix(0);
@@ -72,6 +75,15 @@ pub(super) fn bootstrap(
         let mb = Vp2Model { vp1: vb, ..*model };
         let fit = fit_camera(&mb, vp1_lines, wv1, w, Some(x));
         let (vb, xb) = (fit.vp1, fit.x);
+        let vb = edges
+            .and_then(|(boxes, eo)| {
+                let drawn: Vec<BoxEdgelets> = boxes
+                    .iter()
+                    .flat_map(|b| std::iter::repeat_n(*b, draws[b.vehicle] as usize))
+                    .collect();
+                edgelets::fit_vp1(vb, &drawn, eo)
+            })
+            .map_or(vb, |e| e.0);
         let vb = scene
             .and_then(|(edgelets, so)| scene_lines::refine_vp1(vb, edgelets, so))
             .map_or(vb, |f| f.vp1);

@@ -433,7 +433,10 @@ pub struct Confidence {
     pub focal_px_p84: f64,
     /// Standard deviation of the horizon angle, degrees.
     pub horizon_angle_sd_deg: f64,
-    /// Standard deviation of VP1's position, pixels (RMS over x and y).
+    /// Spread of VP1's position over the resamples, pixels: half the 16th-84th percentile
+    /// range of x and of y, RMS over the two (a few resamples whose VP1 runs off to infinity
+    /// do not decide it). Each resample redoes the moves that placed VP1 (the edgelets along
+    /// the vehicles it drew, the scene's lines).
     pub vp1_sd_px: f64,
     /// The focal length the VP2 rays alone prefer (no priors, no ray bias), pixels.
     pub focal_px_data_only: f64,
@@ -658,9 +661,10 @@ pub fn aggregate_with_scene(
     // The bootstrap's resamples (`super::bootstrap`): the focal lengths of trusted rays, the
     // horizon and VP1.
     let samples = (opts.bootstrap > 0).then(|| {
+        let edges = moved.edges.and(edge_opts).map(|eo| (boxes.as_slice(), eo));
         let scene = moved.scene.and(scene_opts).map(|so| (scene, so));
         let (p1, n) = (located.p1, opts.bootstrap);
-        bootstrap(&model, &prep, lines, p1, x, scene, n, &mut rng)
+        bootstrap(&model, &prep, lines, p1, x, edges, scene, n, &mut rng)
     });
     // The rays' own roll moves with the vehicles drawn and with VP1, through which their
     // horizon runs: its spread over the resamples joins its error model, and where the rays
@@ -1015,6 +1019,16 @@ fn half_p16_p84(v: &[f64]) -> f64 {
     0.5 * (percentile(v.to_vec(), 84.0) - percentile(v.to_vec(), 16.0))
 }
 
+/// [`half_p16_p84`], 0 where it is not a number (fewer than two values).
+fn spread_or_0(v: &[f64]) -> f64 {
+    let s = half_p16_p84(v);
+    if s.is_finite() {
+        s
+    } else {
+        0.0
+    }
+}
+
 fn horizon_sd_deg(b: &Samples, a0_deg: f64) -> f64 {
     let angles: Vec<f64> = b
         .horizon_deg
@@ -1054,7 +1068,7 @@ fn confidence(
         focal_px_p16: p16,
         focal_px_p84: p84,
         horizon_angle_sd_deg: horizon_sd,
-        vp1_sd_px: ((sd(&b.vp1_x).powi(2) + sd(&b.vp1_y).powi(2)) / 2.0).sqrt(),
+        vp1_sd_px: ((spread_or_0(&b.vp1_x).powi(2) + spread_or_0(&b.vp1_y).powi(2)) / 2.0).sqrt(),
         focal_px_data_only: data_only,
         resamples: b.focal_px.len(),
     })
