@@ -99,6 +99,15 @@ pub fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
     percentile_sorted(&v, q)
 }
 
+/// Half the range between the 16th and 84th percentiles of `v`: a normal's standard
+/// deviation that the few values far out (bootstrap refits settled in another valley) do not
+/// decide. NaN for an empty slice.
+pub fn half_p16_p84(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    0.5 * (percentile_sorted(&v, 84.0) - percentile_sorted(&v, 16.0))
+}
+
 /// Population standard deviation (NaN for an empty slice).
 pub fn sd(v: &[f64]) -> f64 {
     let n = v.len() as f64;

@@ -9,7 +9,9 @@ use vpcal_geom::aggregate::edgelets::{
 };
 use vpcal_geom::aggregate::focal::{self, focal_prior_range_widths, focal_widths, TRAFFIC_FOV_DEG};
 use vpcal_geom::aggregate::rays::{rays_focal_likelihood, rays_focal_posterior, RaysRoll};
-use vpcal_geom::aggregate::robust::{aggregate, aggregate_with_edgelets, RobustOptions};
+use vpcal_geom::aggregate::robust::{
+    aggregate, aggregate_with_edgelets, RobustOptions, RobustResult,
+};
 use vpcal_geom::aggregate::tracks::Tangent;
 use vpcal_geom::aggregate::{line_angle_diff, VehicleVps};
 use vpcal_geom::camera::Calibration;
@@ -558,6 +560,40 @@ fn edgelets_for(scene: &Scene, vehicles: &[VehicleVps], seed: u64) -> Vec<Vec<Ed
         .collect()
 }
 
+/// The untrusted rays' roll of `r` as the aggregation weighed it.
+struct RaysRollCase {
+    /// Their model from the scatter alone, and with the resamples' spread.
+    alone: RaysRoll,
+    model: RaysRoll,
+    /// Their own roll, the roll and its reported spread, degrees.
+    own: f64,
+    roll: f64,
+    sd: f64,
+}
+
+/// Checks that the rays set the roll of `r` (aggregated with `opts`) by their model: 2 x
+/// scatter with the resamples' spread in quadrature is the reported error, the roll is their
+/// own times their share, and the horizon's spread is the posterior's.
+fn checked_rays_roll(r: &RobustResult, opts: &RobustOptions) -> RaysRollCase {
+    let ev = &r.evidence;
+    assert!(!ev.rays_trusted && !ev.roll_from_edgelets, "{ev:?}");
+    let alone = RaysRoll::of(ev.rays_scatter_deg.unwrap(), opts.roll_prior_sigma_deg).unwrap();
+    let model = alone.with_sampling(ev.rays_roll_sampling_sd_deg.unwrap());
+    assert!((ev.rays_roll_sd_deg.unwrap() - model.sd_deg).abs() < 1e-12);
+    let own = ev.rays_roll_own_deg.unwrap();
+    let roll = r.calibration.horizon.angle().to_degrees();
+    assert!((roll - model.share() * own).abs() < 1e-6, "{roll} vs {own}");
+    let sd = r.confidence.as_ref().unwrap().horizon_angle_sd_deg;
+    assert!((sd - model.sd_after_deg()).abs() < 1e-12, "{sd}");
+    RaysRollCase {
+        alone,
+        model,
+        own,
+        roll,
+        sd,
+    }
+}
+
 #[test]
 fn the_rays_own_roll_is_weighed_against_the_physical_prior() {
     // A camera rolled by 3° and a CNN-like network (VP2 points at 0.1-0.3 of their distance:
@@ -571,23 +607,13 @@ fn the_rays_own_roll_is_weighed_against_the_physical_prior() {
     let scene = Scene::new(1100.0, 0.4, 3f64.to_radians(), 0.5, 8.0);
     let vehicles = cloud_with(&scene, 300, 0.2, 11, (0.1, 0.3));
     let r = aggregate(&vehicles, scene.pp, &opts).unwrap();
-    let ev = &r.evidence;
-    assert!(!ev.rays_trusted && !ev.roll_from_edgelets, "{ev:?}");
+    let RaysRollCase { own, roll, sd, .. } = checked_rays_roll(&r, &opts);
     let truth = scene.truth().horizon.angle().to_degrees();
-    let own = ev.rays_roll_own_deg.unwrap();
     assert!(
         (own - truth).abs() < 0.7,
         "the rays' own roll {own}° for {truth}°"
     );
-    let model = RaysRoll::of(ev.rays_scatter_deg.unwrap(), opts.roll_prior_sigma_deg)
-        .unwrap()
-        .with_sampling(ev.rays_roll_sampling_sd_deg.unwrap());
-    assert!((ev.rays_roll_sd_deg.unwrap() - model.sd_deg).abs() < 1e-12);
-    let roll = r.calibration.horizon.angle().to_degrees();
-    assert!((roll - model.share() * own).abs() < 1e-6, "{roll} vs {own}");
     assert!(roll > 0.5 * own && roll < own, "{roll} vs {own}");
-    let sd = r.confidence.unwrap().horizon_angle_sd_deg;
-    assert!((sd - model.sd_after_deg()).abs() < 1e-12, "{sd}");
     assert!(
         (roll - truth).abs() < 2.0 * sd,
         "{roll}° ± {sd} for {truth}°"
@@ -613,18 +639,16 @@ fn a_loosely_placed_vp1_widens_the_rays_roll() {
         v.vp1 = fake_vp(c, v.vp1, 8.0 * rng.normal(), 1.0);
     }
     let r = aggregate(&vehicles, scene.pp, &opts).unwrap();
-    let ev = &r.evidence;
-    assert!(!ev.rays_trusted && !ev.roll_from_edgelets, "{ev:?}");
-    let alone = RaysRoll::of(ev.rays_scatter_deg.unwrap(), opts.roll_prior_sigma_deg).unwrap();
-    let spread = ev.rays_roll_sampling_sd_deg.unwrap();
-    let model = alone.with_sampling(spread);
+    let RaysRollCase {
+        alone,
+        model,
+        own,
+        roll,
+        sd,
+    } = checked_rays_roll(&r, &opts);
+    let spread = r.evidence.rays_roll_sampling_sd_deg.unwrap();
     assert!(spread > alone.sd_deg, "{spread} against {}", alone.sd_deg);
-    assert!((ev.rays_roll_sd_deg.unwrap() - model.sd_deg).abs() < 1e-12);
-    let own = ev.rays_roll_own_deg.unwrap();
-    let roll = r.calibration.horizon.angle().to_degrees();
-    assert!((roll - model.share() * own).abs() < 1e-6, "{roll} vs {own}");
-    let sd = r.confidence.unwrap().horizon_angle_sd_deg;
-    assert!((sd - model.sd_after_deg()).abs() < 1e-12);
+    assert!(model.sd_deg > alone.sd_deg);
     // The truth, in posterior standard deviations: with the spread, and without it.
     let truth = scene.truth().horizon.angle().to_degrees();
     let z = (roll - truth).abs() / sd;

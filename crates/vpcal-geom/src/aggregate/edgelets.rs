@@ -30,7 +30,7 @@ use super::focal::{FocalSource, Likelihood, Measured};
 use super::line_angle_diff;
 use super::tracks::Tangent;
 use crate::point::Point2;
-use crate::solve::{nelder_mead, par_map, percentile, percentile_sorted, SplitMix};
+use crate::solve::{half_p16_p84, nelder_mead, par_map, percentile, percentile_sorted, SplitMix};
 
 /// Focal lengths the straight edgelet fit's grid spans, in image widths: 0.25 (a 127° view) to
 /// 20 (a 3° view), beyond the physical range of traffic cameras on both sides, so that the
@@ -377,14 +377,11 @@ fn bootstrap_spread(mut fs: Vec<f64>, rolls: &[f64]) -> (f64, f64, f64) {
     if fs.is_empty() || rolls.is_empty() {
         return (f64::NAN, f64::NAN, f64::NAN);
     }
-    let mut rolls = rolls.to_vec();
     fs.sort_by(f64::total_cmp);
-    rolls.sort_by(f64::total_cmp);
-    let roll_sd = 0.5 * (percentile_sorted(&rolls, 84.0) - percentile_sorted(&rolls, 16.0));
     (
         percentile_sorted(&fs, 16.0),
         percentile_sorted(&fs, 84.0),
-        roll_sd,
+        half_p16_p84(rolls),
     )
 }
 

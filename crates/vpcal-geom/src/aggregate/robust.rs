@@ -91,7 +91,7 @@ use super::vp1::{self, homogeneous, Vp1Choice, Vp1Lines};
 use super::{AggregateError, VehicleVps};
 use crate::camera::Calibration;
 use crate::point::{BoxPx, Point2};
-use crate::solve::{percentile, sd, SplitMix};
+use crate::solve::{half_p16_p84, percentile, sd, SplitMix};
 
 /// Settings of the robust aggregation; `Default` is what vpcal uses.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -672,8 +672,8 @@ pub fn aggregate_with_scene(
     let rays_roll = rays_roll.map(|rr| {
         let spread = samples
             .as_ref()
-            .map(|b| half_p16_p84(&b.rays_roll_own_deg))
-            .filter(|s| s.is_finite());
+            .filter(|b| b.rays_roll_own_deg.len() > 1)
+            .map(|b| half_p16_p84(&b.rays_roll_own_deg));
         evidence.rays_roll_sampling_sd_deg = spread;
         let rr = spread.map_or(rr, |s| rr.with_sampling(s));
         evidence.rays_roll_sd_deg = Some(rr.sd_deg);
@@ -1010,25 +1010,6 @@ fn trusted_rays(focal_px: f64, samples: Option<&Samples>) -> focal::Measured {
 
 /// The standard deviation of the resamples' horizon angles, degrees, measured as line angles
 /// around `a0_deg` (angles near ±180° wrap).
-/// Half the range between the 16th and 84th percentiles of `v` (a standard deviation that
-/// a few resamples in another valley do not decide); NaN with fewer than two values.
-fn half_p16_p84(v: &[f64]) -> f64 {
-    if v.len() < 2 {
-        return f64::NAN;
-    }
-    0.5 * (percentile(v.to_vec(), 84.0) - percentile(v.to_vec(), 16.0))
-}
-
-/// [`half_p16_p84`], 0 where it is not a number (fewer than two values).
-fn spread_or_0(v: &[f64]) -> f64 {
-    let s = half_p16_p84(v);
-    if s.is_finite() {
-        s
-    } else {
-        0.0
-    }
-}
-
 fn horizon_sd_deg(b: &Samples, a0_deg: f64) -> f64 {
     let angles: Vec<f64> = b
         .horizon_deg
@@ -1068,7 +1049,8 @@ fn confidence(
         focal_px_p16: p16,
         focal_px_p84: p84,
         horizon_angle_sd_deg: horizon_sd,
-        vp1_sd_px: ((spread_or_0(&b.vp1_x).powi(2) + spread_or_0(&b.vp1_y).powi(2)) / 2.0).sqrt(),
+        // One VP1 per resample, and there is at least one.
+        vp1_sd_px: ((half_p16_p84(&b.vp1_x).powi(2) + half_p16_p84(&b.vp1_y).powi(2)) / 2.0).sqrt(),
         focal_px_data_only: data_only,
         resamples: b.focal_px.len(),
     })
