@@ -5,7 +5,7 @@
 
 use proptest::prelude::*;
 use vpcal_geom::aggregate::edgelets::{
-    self, fit_curved, near_rays, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
+    self, fit_curved, near_rays, BoxEdgelets, CurvedFit, CurvedVehicle, Edgelet, EdgeletFitOptions,
 };
 use vpcal_geom::aggregate::focal::{self, focal_prior_range_widths, focal_widths, TRAFFIC_FOV_DEG};
 use vpcal_geom::aggregate::rays::{rays_focal_likelihood, rays_focal_posterior, RaysRoll};
@@ -733,6 +733,47 @@ fn edgelets_give_the_roll_and_a_near_vp2s_focal_length() {
     );
     let e = horizon_error(&far, &r.calibration);
     assert!(e < 0.2, "horizon off by {e}°");
+}
+
+/// VP1 placed `d` px off across the horizon, with VP2 near and placed by the edges: the
+/// straight edgelet fit's horizon, through VP1, turns by about `d / |VP1 - VP2|`, and
+/// `roll_vp1_sd_deg` measures that turn (its bootstrap, with VP1 held, cannot).
+#[test]
+fn vp1s_spread_across_the_horizon_turns_the_edgelet_roll() {
+    let scene = Scene::new(1100.0, 0.4, 3f64.to_radians(), 0.5, 8.0);
+    let vehicles = cloud_with(&scene, 300, 0.2, 11, (0.1, 0.3));
+    let edges = edgelets_for(&scene, &vehicles, 12);
+    let boxes: Vec<BoxEdgelets> = vehicles
+        .iter()
+        .zip(&edges)
+        .enumerate()
+        .map(|(i, (v, e))| BoxEdgelets {
+            centre: v.box_px.unwrap().center(),
+            vp1: v.vp1,
+            vp2: v.vp2,
+            edgelets: e,
+            vehicle: i,
+        })
+        .collect();
+    let opts = EdgeletFitOptions::default();
+    let (vp1, vp2) = (scene.vp([0.0, 1.0, 0.0]), scene.vp([1.0, 0.0, 0.0]));
+    let roll0 = (vp2.y - vp1.y).atan2(vp2.x - vp1.x);
+    let fit = edgelets::fit(vp1, scene.pp, 1920.0, &boxes, roll0, &opts, 1).unwrap();
+    assert!(fit.focal_usable, "{fit:?}");
+    let vp1_sd = |d: f64| edgelets::roll_vp1_sd_deg(&fit, vp1, scene.pp, &boxes, &opts, d);
+    assert_eq!(vp1_sd(0.0), 0.0);
+    let d = 40.0;
+    let expected = (d / (vp2 - vp1).norm()).atan().to_degrees();
+    let turned = vp1_sd(d);
+    assert!(
+        (turned / expected - 1.0).abs() < 0.25,
+        "VP1 {d} px off turned the roll by {turned}°, the geometry says {expected}°"
+    );
+    // It joins the roll's spread in quadrature.
+    let with = fit.with_vp1_spread(turned);
+    let total = fit.roll_total_sd_deg().hypot(turned);
+    assert!((with.roll_total_sd_deg() - total).abs() < 1e-12);
+    assert_eq!(fit.with_vp1_spread(f64::NAN), fit);
 }
 
 #[test]

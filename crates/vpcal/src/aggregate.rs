@@ -625,6 +625,10 @@ pub fn aggregate(
                     serde_json::json!(e.edgelet_roll_turn_sd_deg),
                 );
                 o.insert(
+                    "edgelet_roll_vp1_sd_deg".into(),
+                    serde_json::json!(e.edgelet_roll_vp1_sd_deg),
+                );
+                o.insert(
                     "edgelet_roll_deg".into(),
                     serde_json::json!(e.edgelet_roll_deg),
                 );

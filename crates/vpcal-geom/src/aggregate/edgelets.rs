@@ -253,6 +253,9 @@ pub struct EdgeletFit {
     /// back by [`EDGE_TURN_DEG`] (times each edge's [`edge_turn_share`]) ∓ 1°, per degree,
     /// times that uncertainty.
     pub roll_turn_sd_deg: f64,
+    /// How far VP1's spread across the horizon moves the roll, degrees
+    /// ([`roll_vp1_sd_deg`]); 0 until measured ([`EdgeletFit::with_vp1_spread`]).
+    pub roll_vp1_sd_deg: f64,
     pub focal_px_p16: f64,
     pub focal_px_p84: f64,
     /// Whether the roll and the focal length pass the identifiability gates (the roll: its
@@ -272,9 +275,23 @@ impl EdgeletFit {
         0.5 * (self.focal_px_p84 / self.focal_px_p16).ln()
     }
 
-    /// The roll's spread, degrees: its bootstrap's and the edges' turn's together.
+    /// The roll's spread, degrees: its bootstrap's, the edges' turn's and VP1's together.
     pub fn roll_total_sd_deg(&self) -> f64 {
-        self.roll_sd_deg.hypot(self.roll_turn_sd_deg)
+        self.roll_sd_deg
+            .hypot(self.roll_turn_sd_deg)
+            .hypot(self.roll_vp1_sd_deg)
+    }
+
+    /// The fit with VP1's share of the roll's spread (degrees; a non-finite one leaves it).
+    pub fn with_vp1_spread(self, roll_vp1_sd_deg: f64) -> EdgeletFit {
+        EdgeletFit {
+            roll_vp1_sd_deg: if roll_vp1_sd_deg.is_finite() {
+                roll_vp1_sd_deg
+            } else {
+                self.roll_vp1_sd_deg
+            },
+            ..self
+        }
     }
 
     fn measured(&self) -> Measured {
@@ -343,6 +360,72 @@ struct Flat {
     vehicles: usize,
 }
 
+impl Flat {
+    /// The edgelets of `vehicles` the fit uses with VP1 at `vp1` (near each vehicle's VP2 ray,
+    /// not pointing at VP1, turned back by the edges' systematic turn); `None` with too few.
+    fn of(vp1: Point2, vehicles: &[BoxEdgelets], opts: &EdgeletFitOptions) -> Option<Flat> {
+        let ex1 = opts.exclude_vp1_deg.to_radians();
+        let kept: Vec<(usize, Vec<(Point2, f64)>)> = vehicles
+            .iter()
+            .map(|v| {
+                let near = near_ray(
+                    v.centre,
+                    v.vp2,
+                    v.edgelets,
+                    opts.gate_vp2_deg,
+                    opts.max_per_vehicle,
+                )
+                .into_iter()
+                .filter(|e| {
+                    let d = vp1 - e.point();
+                    line_angle_diff(e.angle - d.y.atan2(d.x)).abs() > ex1
+                })
+                .map(|e| (e.point(), e.angle))
+                .collect::<Vec<_>>();
+                (v.vehicle, near)
+            })
+            .filter(|(_, v)| !v.is_empty())
+            .collect();
+        let total: usize = kept.iter().map(|(_, v)| v.len()).sum();
+        if kept.len() < opts.min_vehicles || total < opts.min_edgelets || !vp1.is_finite() {
+            return None;
+        }
+        // Evenly spaced vehicles, so that the fit's cost stays bounded.
+        let step = (total as f64 / opts.max_edgelets as f64).max(1.0);
+        let mut flat = Flat {
+            point: vec![],
+            angle: vec![],
+            towards_vp1: vec![],
+            group: vec![],
+            groups: 0,
+            vehicle_of_group: vec![],
+            vehicles: 0,
+        };
+        let mut next = 0.0;
+        let mut renumber = std::collections::HashMap::new();
+        for (i, (vehicle, v)) in kept.iter().enumerate() {
+            if (i as f64) < next {
+                continue;
+            }
+            next += step;
+            for (p, a) in v {
+                let to_vp1 = vp1 - *p;
+                let alpha = line_angle_diff(to_vp1.y.atan2(to_vp1.x) - a);
+                flat.point.push(*p);
+                flat.angle.push(a - edge_turn(alpha));
+                flat.towards_vp1.push(alpha.signum());
+                flat.group.push(flat.groups);
+            }
+            flat.groups += 1;
+            let n = renumber.len();
+            flat.vehicle_of_group
+                .push(*renumber.entry(*vehicle).or_insert(n));
+        }
+        flat.vehicles = renumber.len();
+        Some(flat)
+    }
+}
+
 /// The fit's cost of `x = [ln f, roll]`: a Cauchy loss (scale `s`, radians) of the angles
 /// between the (turned back) edgelets, each turned by `turn` radians more towards the
 /// direction to VP1 at its place (away from it when `turn` is negative), and the directions
@@ -397,64 +480,7 @@ pub fn fit(
     opts: &EdgeletFitOptions,
     seed: u64,
 ) -> Option<EdgeletFit> {
-    let ex1 = opts.exclude_vp1_deg.to_radians();
-    let kept: Vec<(usize, Vec<(Point2, f64)>)> = vehicles
-        .iter()
-        .map(|v| {
-            let near = near_ray(
-                v.centre,
-                v.vp2,
-                v.edgelets,
-                opts.gate_vp2_deg,
-                opts.max_per_vehicle,
-            )
-            .into_iter()
-            .filter(|e| {
-                let d = vp1 - e.point();
-                line_angle_diff(e.angle - d.y.atan2(d.x)).abs() > ex1
-            })
-            .map(|e| (e.point(), e.angle))
-            .collect::<Vec<_>>();
-            (v.vehicle, near)
-        })
-        .filter(|(_, v)| !v.is_empty())
-        .collect();
-    let total: usize = kept.iter().map(|(_, v)| v.len()).sum();
-    if kept.len() < opts.min_vehicles || total < opts.min_edgelets || !vp1.is_finite() {
-        return None;
-    }
-    // Evenly spaced vehicles, so that the fit's cost stays bounded.
-    let step = (total as f64 / opts.max_edgelets as f64).max(1.0);
-    let mut flat = Flat {
-        point: vec![],
-        angle: vec![],
-        towards_vp1: vec![],
-        group: vec![],
-        groups: 0,
-        vehicle_of_group: vec![],
-        vehicles: 0,
-    };
-    let mut next = 0.0;
-    let mut renumber = std::collections::HashMap::new();
-    for (i, (vehicle, v)) in kept.iter().enumerate() {
-        if (i as f64) < next {
-            continue;
-        }
-        next += step;
-        for (p, a) in v {
-            let to_vp1 = vp1 - *p;
-            let alpha = line_angle_diff(to_vp1.y.atan2(to_vp1.x) - a);
-            flat.point.push(*p);
-            flat.angle.push(a - edge_turn(alpha));
-            flat.towards_vp1.push(alpha.signum());
-            flat.group.push(flat.groups);
-        }
-        flat.groups += 1;
-        let n = renumber.len();
-        flat.vehicle_of_group
-            .push(*renumber.entry(*vehicle).or_insert(n));
-    }
-    flat.vehicles = renumber.len();
+    let flat = Flat::of(vp1, vehicles, opts)?;
     let s = opts.scale_deg.to_radians();
     let ones = vec![1.0; flat.groups];
     let [lo_w, hi_w] = STRAIGHT_FOCAL_GRID_WIDTHS;
@@ -546,12 +572,54 @@ pub fn fit(
         vehicles: flat.groups,
         roll_sd_deg,
         roll_turn_sd_deg,
+        roll_vp1_sd_deg: 0.0,
         focal_px_p16: p16,
         focal_px_p84: p84,
         roll_usable,
         focal_usable,
         focal_bias_log_spread,
     })
+}
+
+/// How far VP1's spread across the horizon turns `fit`'s roll, degrees: half the roll
+/// difference between two refits (from `fit`'s focal length and roll, no grid, no
+/// bootstrap) with VP1 moved `shift_px` either way along the horizon's normal, each with
+/// the edgelets it selects there. The bootstrap holds VP1 where it was placed, so its
+/// spread does not see this; the horizon runs through VP1, and how far it turns depends on
+/// how well the edges place VP2's distance, which the refits let them decide (far and
+/// unplaced, VP2 slides and the roll stays). NaN where a refit has too few edgelets.
+pub fn roll_vp1_sd_deg(
+    fit: &EdgeletFit,
+    vp1: Point2,
+    pp: Point2,
+    vehicles: &[BoxEdgelets],
+    opts: &EdgeletFitOptions,
+    shift_px: f64,
+) -> f64 {
+    if shift_px == 0.0 {
+        return 0.0;
+    }
+    let normal = Point2::new(-fit.roll.sin(), fit.roll.cos());
+    let s = opts.scale_deg.to_radians();
+    let start = [fit.focal_px.ln(), fit.roll];
+    let step0 = [0.05, 0.2f64.to_radians()];
+    let rolls = par_map(&[-shift_px, shift_px], |&d| {
+        let moved = vp1 + normal * d;
+        let flat = Flat::of(moved, vehicles, opts)?;
+        let ones = vec![1.0; flat.groups];
+        let x = nelder_mead(
+            |x| cost(&flat, &ones, moved, pp, x, s, 0.0),
+            &start,
+            &step0,
+            FIT_ITERATIONS,
+        )
+        .x;
+        Some(x[1])
+    });
+    match rolls[..] {
+        [Some(a), Some(b)] => 0.5 * line_angle_diff(a - b).abs().to_degrees(),
+        _ => f64::NAN,
+    }
 }
 
 /// VP1 from the edgelets along the vehicles: each vehicle's edgelets within `gate_vp2_deg` of

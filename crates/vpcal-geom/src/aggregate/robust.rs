@@ -371,6 +371,9 @@ pub struct Evidence {
     /// (`edge::EDGE_TURN_SD_DEG`) moves the edgelet fit's roll, degrees; the roll's spread
     /// downstream is this and the bootstrap's in quadrature.
     pub edgelet_roll_turn_sd_deg: Option<f64>,
+    /// How far VP1's spread across the horizon moves the straight edgelet fit's roll,
+    /// degrees (`edgelets::roll_vp1_sd_deg`), where that fit set the roll.
+    pub edgelet_roll_vp1_sd_deg: Option<f64>,
     /// Where the untrusted rays placed the horizon: their own roll (degrees, before the
     /// physical prior on it pulled it towards level) and its standard deviation
     /// ([`RaysRoll`](super::rays::RaysRoll)); the roll is `roll_deg` unless the edgelets or
@@ -679,6 +682,30 @@ pub fn aggregate_with_scene(
         evidence.rays_roll_sd_deg = Some(rr.sd_deg);
         rr
     });
+    // The straight edgelet fit held VP1 where it was placed; VP1's spread across the horizon
+    // (its resamples') turns that fit's roll too (`edge::roll_vp1_sd_deg`).
+    let usable = usable
+        .zip(edge_opts)
+        .filter(|_| curved_fit.is_none())
+        .map(|(e, eo)| {
+            let normal = Point2::new(-e.roll.sin(), e.roll.cos());
+            let shift = samples
+                .as_ref()
+                .filter(|b| b.vp1_x.len() > 1)
+                .map_or(0.0, |b| {
+                    let across: Vec<f64> = b
+                        .vp1_x
+                        .iter()
+                        .zip(&b.vp1_y)
+                        .map(|(x, y)| (Point2::new(*x, *y) - vp1).dot(normal))
+                        .collect();
+                    half_p16_p84(&across)
+                });
+            let sd = edge::roll_vp1_sd_deg(&e, vp1, pp, &boxes, eo, shift);
+            evidence.edgelet_roll_vp1_sd_deg = Some(sd).filter(|s| s.is_finite());
+            e.with_vp1_spread(sd)
+        })
+        .or(usable.filter(|_| curved_fit.is_some()));
     let roll_from = RollFrom::of(curved_fit, usable, rays_roll);
     if let (RollFrom::Rays(rr), Some(own)) = (roll_from, evidence.rays_roll_own_deg) {
         x[1] = rr.roll(own.to_radians());
