@@ -48,7 +48,7 @@ def run(exe, picture, vp1, roll):
     return json.loads(out)
 
 
-def row(name, true_f, r):
+def row(name, true_f, r, true_roll=None):
     f = r["fit"]
     if f is None:
         print(f"{name:22s} true {true_f:6.0f}  segments {r['segments']:5d}  no candidate")
@@ -61,7 +61,19 @@ def row(name, true_f, r):
           f"boot {lo / true_f:4.2f}-{hi / true_f:4.2f}  z {e / sd:5.2f}  segments {r['segments']:5d} "
           f"candidates {f['candidates']:4d} supporting {f['supporting']:3d}  "
           f"{'' if f['identified'] else 'not identified'}")
+    own = f.get("own_roll_deg")
+    if own is not None and true_roll is not None:
+        d = own - math.degrees(true_roll)
+        OWN_ROLLS.append((name, d, f["own_roll_sd_deg"]))
+        spread = f["own_roll_sd_deg"]
+        spread = "not measured (it could not contradict)" if spread is None else f"{spread:.2f}"
+        print(f"{'':22s} own roll (no prior) {own:+6.2f} deg, minus the true {d:+5.2f}, spread {spread}")
     return e if f["identified"] else None
+
+
+# The verticals' own roll (gravity's horizon) against the true road horizon's: (view, own minus
+# true, degrees, its resamples' spread).
+OWN_ROLLS = []
 
 
 def report(errors, total):
@@ -71,6 +83,10 @@ def report(errors, total):
         return
     print(f"identified {len(e)} of {total}: ln(fit / truth) median {np.median(e):+.3f}, mean {e.mean():+.3f}, "
           f"|.| median {np.median(np.abs(e)):.3f}, rms {math.sqrt(np.mean(e ** 2)):.3f}")
+    if OWN_ROLLS:
+        d = np.array([x[1] for x in OWN_ROLLS])
+        print(f"own roll identified on {len(d)} of {total}: minus the true, median {np.median(d):+.2f}, "
+              f"|.| median {np.median(np.abs(d)):.2f}, max |.| {np.abs(d).max():.2f} deg")
 
 
 def bcs():
@@ -82,7 +98,7 @@ def bcs():
         true_f = math.sqrt(-np.dot(vp1 - pp, vp2 - pp))
         roll = math.atan2(vp2[1] - vp1[1], vp2[0] - vp1[0])
         errors.append(row(name, true_f, run(exe, os.path.join(DATA, "bcs", "dataset", name, "screen.png"), vp1,
-                                            roll)))
+                                            roll), roll))
     report(errors, len(cameras))
 
 
@@ -104,7 +120,7 @@ def suite(folder):
                 continue
             vp1, vp2 = np.array(cam["vp1"]), np.array(cam["vp2"])
             roll = math.atan2(vp2[1] - vp1[1], vp2[0] - vp1[0])
-            errors.append(row(name, cam["focal_px"], run(exe, picture, vp1, roll)))
+            errors.append(row(name, cam["focal_px"], run(exe, picture, vp1, roll), roll))
     report(errors, len(scenes))
 
 

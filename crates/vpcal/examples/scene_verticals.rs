@@ -45,6 +45,8 @@ fn main() {
             "supporting": f.supporting,
             "bootstrap_px": f.bootstrap_px,
             "identified": f.identified,
+            "own_roll_deg": f.own_roll.map(f64::to_degrees),
+            "own_roll_sd_deg": Some(f.own_roll_sd.to_degrees()).filter(|s| s.is_finite()),
         })),
     });
     println!("{out}");

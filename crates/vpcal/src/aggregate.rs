@@ -276,6 +276,25 @@ impl Aggregated {
         ))
     }
 
+    /// The warning of a road horizon that the scene's vertical lines contradict
+    /// (`evidence.horizon_conflict_deg`); `None` otherwise.
+    pub fn horizon_conflict_warning(&self) -> Option<String> {
+        let e = self.robust_evidence.as_ref()?;
+        let d = e.horizon_conflict_deg?;
+        let own = e.verticals_roll_deg?;
+        Some(format!(
+            "the scene's vertical lines stand {own:+.1}° where the road's horizon is at \
+             {:+.1}°: {d:+.1}° apart, more than a road's cross slope and the two measurements' \
+             errors allow ({:.1} standard deviations): the road may not be one plane (a road \
+             that climbs or falls as it curves) or the vehicles' cues mislead; the horizon's \
+             spread takes the difference and the vertical lines do not give the focal length; \
+             check the overlay, and give known distances along and across the road (`vpcal \
+             scale`) or --focal for measurements",
+            own - d,
+            e.verticals_roll_z.unwrap_or(f64::NAN).abs()
+        ))
+    }
+
     /// The camera of this aggregation for principal point `pp`, with `focal_px` when the
     /// focal length is known (see [`Aggregated::with_focal`]).
     ///
@@ -653,6 +672,22 @@ pub fn aggregate(
                 );
                 o.insert("focal_from_verticals".into(), e.focal_from_verticals.into());
                 o.insert(
+                    "verticals_roll_deg".into(),
+                    serde_json::json!(e.verticals_roll_deg),
+                );
+                o.insert(
+                    "verticals_roll_sd_deg".into(),
+                    serde_json::json!(e.verticals_roll_sd_deg),
+                );
+                o.insert(
+                    "verticals_roll_z".into(),
+                    serde_json::json!(e.verticals_roll_z),
+                );
+                o.insert(
+                    "horizon_conflict_deg".into(),
+                    serde_json::json!(e.horizon_conflict_deg),
+                );
+                o.insert(
                     "focal_sources".into(),
                     serde_json::json!(r.focal.carried_by),
                 );
@@ -779,6 +814,37 @@ mod tests {
             let w = with_evidence(FocalSource::Edgelets, strong).warnings();
             assert!(w.is_empty(), "{strong:?}: {w:?}");
         }
+    }
+
+    #[test]
+    fn a_horizon_the_plumb_lines_contradict_fails_the_horizon_check() {
+        let e = robust::Evidence {
+            verticals_roll_deg: Some(-0.4),
+            verticals_roll_z: Some(-5.4),
+            horizon_conflict_deg: Some(-8.8),
+            ..robust::Evidence::default()
+        };
+        let a = with_evidence(FocalSource::Edgelets, e);
+        let w = a.horizon_conflict_warning().unwrap();
+        assert!(
+            w.contains("-0.4°") && w.contains("+8.4°") && w.contains("5.4 standard"),
+            "{w}"
+        );
+        let found = crate::plausible::check_horizon(&a);
+        assert_eq!(found.len(), 1);
+        assert_eq!(found[0].status, vpcal_formats::calib::Status::Unreliable);
+        assert_eq!(found[0].check, crate::plausible::HORIZON_CHECK);
+        // The plumb lines' own roll identified and agreeing: no finding.
+        let agree = with_evidence(
+            FocalSource::Edgelets,
+            robust::Evidence {
+                horizon_conflict_deg: None,
+                verticals_roll_z: Some(0.7),
+                ..e
+            },
+        );
+        assert!(agree.horizon_conflict_warning().is_none());
+        assert!(crate::plausible::check_horizon(&agree).is_empty());
     }
 
     #[test]

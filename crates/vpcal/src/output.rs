@@ -132,6 +132,10 @@ pub fn aggregated_file(
         crate::plausible::VP1_CHECK,
         crate::plausible::check_vp1(agg),
     );
+    file.replace_checks(
+        crate::plausible::HORIZON_CHECK,
+        crate::plausible::check_horizon(agg),
+    );
     file
 }
 

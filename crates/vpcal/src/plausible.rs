@@ -26,6 +26,8 @@
 //! - tilt: a camera that sees the road's vanishing point looks at most a few degrees above
 //!   the horizon; the horizon's own row bounds it from below ([`TILT_POSSIBLE_DEG`]).
 //! - VP1: resting on the network's VP1 rays alone while they scatter ([`check_vp1`]).
+//! - the horizon: contradicted by the scene's plumb lines beyond a road's cross slope
+//!   ([`check_horizon`]).
 
 use vpcal_formats::calib::{CalibrationFile, PlausibilityCheck, Status};
 
@@ -53,6 +55,8 @@ pub const CAMERA_CHECK: &str = "camera";
 pub const SPEEDS_CHECK: &str = "speeds";
 /// The check of what VP1 rests on ([`check_vp1`]).
 pub const VP1_CHECK: &str = "vp1";
+/// The check of the horizon against the scene's vertical lines ([`check_horizon`]).
+pub const HORIZON_CHECK: &str = "horizon";
 
 /// A failed check of kind `check`.
 fn failed(check: &str, status: Status, warning: String) -> PlausibilityCheck {
@@ -184,6 +188,18 @@ pub fn check_speeds(
 pub fn check_vp1(agg: &crate::aggregate::Aggregated) -> Vec<PlausibilityCheck> {
     agg.weak_vp1_warning()
         .map(|w| failed(VP1_CHECK, Status::Unreliable, w))
+        .into_iter()
+        .collect()
+}
+
+/// The road's horizon against the scene's plumb lines: a road's surface leans off gravity's
+/// horizon by its cross slope (2-2.5 %, up to 7-8 % on a banked curve: 1-4.6°); a horizon that
+/// the vertical lines contradict beyond that and both errors
+/// (`vpcal_geom::aggregate::verticals::HORIZON_CONFLICT_Z`) is not the road's, and the camera
+/// built on it is not one a road can have.
+pub fn check_horizon(agg: &crate::aggregate::Aggregated) -> Vec<PlausibilityCheck> {
+    agg.horizon_conflict_warning()
+        .map(|w| failed(HORIZON_CHECK, Status::Unreliable, w))
         .into_iter()
         .collect()
 }

@@ -425,6 +425,17 @@ pub struct Evidence {
     pub verticals_focal_px: Option<f64>,
     #[serde(default)]
     pub focal_from_verticals: bool,
+    /// The scene's vertical lines' own roll, degrees, with no prior from the road (gravity's
+    /// horizon), where they identify it, and its spread over their resamples
+    /// (`verticals::VerticalsFit::own_roll`).
+    pub verticals_roll_deg: Option<f64>,
+    pub verticals_roll_sd_deg: Option<f64>,
+    /// How far `verticals_roll_deg` lies from the road horizon's roll, in standard deviations
+    /// (`verticals::VerticalsFit::against_horizon`).
+    pub verticals_roll_z: Option<f64>,
+    /// Where that exceeds `verticals::HORIZON_CONFLICT_Z`: the difference, degrees (the
+    /// verticals' focal length is then not used, and the horizon's spread takes it).
+    pub horizon_conflict_deg: Option<f64>,
 }
 
 /// The spread of the estimate under resampling of the vehicles.
@@ -738,7 +749,20 @@ pub fn aggregate_with_scene(
                 opts.seed,
             )
         });
-    let vertical = vertical_fit.as_ref().map(|v| v as &dyn FocalSource);
+    // Plumb lines meet at gravity's VP3: where their own roll contradicts the road horizon's
+    // beyond the road's cross slope and both errors, the horizon (or the verticals) is wrong,
+    // and the verticals' focal length, fitted under the road horizon's roll, is not used.
+    let against = vertical_fit
+        .as_ref()
+        .zip(opts.verticals.as_ref())
+        .and_then(|(v, vo)| v.against_horizon(x[1], roll_sd_deg.to_radians(), vo));
+    let conflict = against.filter(|(z, _)| z.abs() > verticals::HORIZON_CONFLICT_Z);
+    evidence.verticals_roll_z = against.map(|(z, _)| z);
+    evidence.horizon_conflict_deg = conflict.map(|(_, d)| d.to_degrees());
+    let vertical = vertical_fit
+        .as_ref()
+        .filter(|_| conflict.is_none())
+        .map(|v| v as &dyn FocalSource);
     let sources: Vec<&dyn FocalSource> = match &curved_fit {
         Some(c) => [Some(c as &dyn FocalSource), vertical]
             .into_iter()
@@ -769,6 +793,11 @@ pub fn aggregate_with_scene(
         evidence.vertical_candidates = v.candidates;
         evidence.vertical_supporting = v.supporting;
         evidence.verticals_focal_px = v.identified.then_some(v.focal_px);
+        evidence.verticals_roll_deg = v.own_roll.map(f64::to_degrees);
+        evidence.verticals_roll_sd_deg = v
+            .own_roll
+            .map(|_| v.own_roll_sd.to_degrees())
+            .filter(|s| s.is_finite());
     }
     evidence.focal_from_verticals = carried("verticals");
     if let Some(e) = edge_fit {
@@ -849,6 +878,8 @@ pub fn aggregate_with_scene(
             _ => None,
         };
         let horizon_sd = roll_from.sd_deg(Some(&b), calibration.horizon.angle().to_degrees());
+        // Contradicted by the plumb lines, the horizon is known no better than the two differ.
+        let horizon_sd = conflict.map_or(horizon_sd, |(_, d)| horizon_sd.hypot(d.to_degrees()));
         confidence(&b, &model, &prep, horizon_sd, edge_focal)
     });
     Ok(RobustResult {
