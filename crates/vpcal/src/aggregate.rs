@@ -287,9 +287,9 @@ impl Aggregated {
              {:+.1}°: {d:+.1}° apart, more than a road's cross slope and the two measurements' \
              errors allow ({:.1} standard deviations): the road may not be one plane (a road \
              that climbs or falls as it curves) or the vehicles' cues mislead; the horizon's \
-             spread takes the difference and the vertical lines do not give the focal length; \
-             check the overlay, and give known distances along and across the road (`vpcal \
-             scale`) or --focal for measurements",
+             spread takes the difference, and the focal length is assumed, since every cue \
+             for it rests on that horizon; check the overlay, and give known distances along \
+             and across the road (`vpcal scale`) or --focal for measurements",
             own - d,
             e.verticals_roll_z.unwrap_or(f64::NAN).abs()
         ))

@@ -433,8 +433,9 @@ pub struct Evidence {
     /// How far `verticals_roll_deg` lies from the road horizon's roll, in standard deviations
     /// (`verticals::VerticalsFit::against_horizon`).
     pub verticals_roll_z: Option<f64>,
-    /// Where that exceeds `verticals::HORIZON_CONFLICT_Z`: the difference, degrees (the
-    /// verticals' focal length is then not used, and the horizon's spread takes it).
+    /// Where that exceeds `verticals::HORIZON_CONFLICT_Z`: the difference, degrees (no focal
+    /// cue is then used, each resting on that horizon: f is the prior's; and the horizon's
+    /// spread takes the difference).
     pub horizon_conflict_deg: Option<f64>,
 }
 
@@ -751,7 +752,8 @@ pub fn aggregate_with_scene(
         });
     // Plumb lines meet at gravity's VP3: where their own roll contradicts the road horizon's
     // beyond the road's cross slope and both errors, the horizon (or the verticals) is wrong,
-    // and the verticals' focal length, fitted under the road horizon's roll, is not used.
+    // and no focal cue is used: every one (the verticals under the horizon's roll, the
+    // edgelets' and the rays' VP2 on it, the curved fit's one plane) rests on that horizon.
     let against = vertical_fit
         .as_ref()
         .zip(opts.verticals.as_ref())
@@ -759,10 +761,7 @@ pub fn aggregate_with_scene(
     let conflict = against.filter(|(z, _)| z.abs() > verticals::HORIZON_CONFLICT_Z);
     evidence.verticals_roll_z = against.map(|(z, _)| z);
     evidence.horizon_conflict_deg = conflict.map(|(_, d)| d.to_degrees());
-    let vertical = vertical_fit
-        .as_ref()
-        .filter(|_| conflict.is_none())
-        .map(|v| v as &dyn FocalSource);
+    let vertical = vertical_fit.as_ref().map(|v| v as &dyn FocalSource);
     let sources: Vec<&dyn FocalSource> = match &curved_fit {
         Some(c) => [Some(c as &dyn FocalSource), vertical]
             .into_iter()
@@ -779,6 +778,7 @@ pub fn aggregate_with_scene(
         }
         None => vertical.into_iter().collect(),
     };
+    let sources = if conflict.is_some() { vec![] } else { sources };
     let focal = focal::fuse(range_px, &focal::cues_of(&sources))
         .ok_or_else(|| not_enough(format!("invalid focal range {range_px:?} px")))?;
     let carried = |s: &str| focal.carried_by.contains(&s);
