@@ -638,60 +638,59 @@ pub fn aggregate(
                     .map(|c| [c.focal_px_p16, c.focal_px_p84]),
                 "vp2_rays_only_focal_px": r.confidence.as_ref().map(|c| c.focal_px_data_only),
             });
-            if let Some(o) = evidence.as_object_mut() {
-                o.insert(
-                    "edgelet_roll_turn_sd_deg".into(),
+            let more = [
+                (
+                    "edgelet_roll_turn_sd_deg",
                     serde_json::json!(e.edgelet_roll_turn_sd_deg),
-                );
-                o.insert(
-                    "edgelet_roll_vp1_sd_deg".into(),
+                ),
+                (
+                    "edgelet_roll_vp1_sd_deg",
                     serde_json::json!(e.edgelet_roll_vp1_sd_deg),
-                );
-                o.insert(
-                    "edgelet_roll_deg".into(),
-                    serde_json::json!(e.edgelet_roll_deg),
-                );
-                o.insert(
-                    "rays_roll_own_deg".into(),
-                    serde_json::json!(e.rays_roll_own_deg),
-                );
-                o.insert(
-                    "rays_roll_sd_deg".into(),
-                    serde_json::json!(e.rays_roll_sd_deg),
-                );
-                o.insert(
-                    "rays_roll_sampling_sd_deg".into(),
+                ),
+                ("edgelet_roll_deg", serde_json::json!(e.edgelet_roll_deg)),
+                ("rays_roll_own_deg", serde_json::json!(e.rays_roll_own_deg)),
+                ("rays_roll_sd_deg", serde_json::json!(e.rays_roll_sd_deg)),
+                (
+                    "rays_roll_sampling_sd_deg",
                     serde_json::json!(e.rays_roll_sampling_sd_deg),
-                );
+                ),
                 // The scene's vertical lines (`vpcal_geom::aggregate::verticals`).
-                o.insert("vertical_candidates".into(), e.vertical_candidates.into());
-                o.insert("vertical_supporting".into(), e.vertical_supporting.into());
-                o.insert(
-                    "verticals_focal_px".into(),
+                (
+                    "vertical_candidates",
+                    serde_json::json!(e.vertical_candidates),
+                ),
+                (
+                    "vertical_supporting",
+                    serde_json::json!(e.vertical_supporting),
+                ),
+                (
+                    "verticals_focal_px",
                     serde_json::json!(e.verticals_focal_px),
-                );
-                o.insert("focal_from_verticals".into(), e.focal_from_verticals.into());
-                o.insert(
-                    "verticals_roll_deg".into(),
+                ),
+                (
+                    "focal_from_verticals",
+                    serde_json::json!(e.focal_from_verticals),
+                ),
+                (
+                    "verticals_roll_deg",
                     serde_json::json!(e.verticals_roll_deg),
-                );
-                o.insert(
-                    "verticals_roll_sd_deg".into(),
+                ),
+                (
+                    "verticals_roll_sd_deg",
                     serde_json::json!(e.verticals_roll_sd_deg),
-                );
-                o.insert(
-                    "verticals_roll_z".into(),
-                    serde_json::json!(e.verticals_roll_z),
-                );
-                o.insert(
-                    "horizon_conflict_deg".into(),
+                ),
+                ("verticals_roll_z", serde_json::json!(e.verticals_roll_z)),
+                (
+                    "horizon_conflict_deg",
                     serde_json::json!(e.horizon_conflict_deg),
-                );
-                o.insert(
-                    "focal_sources".into(),
-                    serde_json::json!(r.focal.carried_by),
-                );
-                o.insert("focal_cues".into(), serde_json::Value::Array(focal_cues));
+                ),
+                ("focal_sources", serde_json::json!(r.focal.carried_by)),
+                ("focal_cues", serde_json::Value::Array(focal_cues)),
+            ];
+            if let Some(o) = evidence.as_object_mut() {
+                for (key, value) in more {
+                    o.insert(key.into(), value);
+                }
             }
             let confidence = r.confidence.as_ref().map(|c| Confidence {
                 horizon_angle_sd_deg: c.horizon_angle_sd_deg,

@@ -6,7 +6,8 @@ use super::rays::{fit_camera, Vp2Model};
 use super::scene_lines::{self, SceneLineOptions};
 use super::vehicles::Prepared;
 use super::vp1::{fit_vp1, from_sphere, vp1_of, Vp1Lines};
-use crate::solve::SplitMix;
+use crate::point::Point2;
+use crate::solve::{half_p16_p84, SplitMix};
 
 /// The bootstrap's resamples ([`bootstrap`]).
 pub(super) struct Samples {
@@ -18,6 +19,23 @@ pub(super) struct Samples {
     /// Where the rays are not trusted, their own roll in each resample (degrees, before its
     /// prior: [`RaysRoll`](super::rays::RaysRoll)).
     pub rays_roll_own_deg: Vec<f64>,
+}
+
+impl Samples {
+    /// The resamples' VP1 spread along the unit direction `normal` about `vp1`: half the
+    /// 16th-84th percentile range of their offsets (0 with fewer than two resamples).
+    pub fn vp1_spread_along(&self, vp1: Point2, normal: Point2) -> f64 {
+        if self.vp1_x.len() < 2 {
+            return 0.0;
+        }
+        let along: Vec<f64> = self
+            .vp1_x
+            .iter()
+            .zip(&self.vp1_y)
+            .map(|(x, y)| (Point2::new(*x, *y) - vp1).dot(normal))
+            .collect();
+        half_p16_p84(&along)
+    }
 }
 
 /// Refit VP1 and the VP2 model (`x` the start) on `resamples` Poisson resamplings of the

@@ -344,6 +344,11 @@ pub(super) fn vp2_direction(vp1: Point2, pp: Point2, ln_f: f64, roll: f64) -> (P
     (h, -v.dot(h) / (f * f + v.dot(v)))
 }
 
+/// The straight fit's first Nelder-Mead step in `[ln f, roll]`: 5 % in f, 0.2° in roll.
+fn straight_step() -> [f64; 2] {
+    [0.05, 0.2f64.to_radians()]
+}
+
 /// Edgelets of the vehicles that the fit uses, flattened, with each one's box index
 /// (`group`), and each box's physical vehicle (`vehicle_of_group`, numbered `0..vehicles`).
 struct Flat {
@@ -502,7 +507,7 @@ pub fn fit(
             best = (c, x);
         }
     }
-    let step0 = [0.05, 0.2f64.to_radians()];
+    let step0 = straight_step();
     let x = nelder_mead(
         |x| cost(&flat, &ones, vp1, pp, x, s, 0.0),
         &best.1,
@@ -602,7 +607,7 @@ pub fn roll_vp1_sd_deg(
     let normal = Point2::new(-fit.roll.sin(), fit.roll.cos());
     let s = opts.scale_deg.to_radians();
     let start = [fit.focal_px.ln(), fit.roll];
-    let step0 = [0.05, 0.2f64.to_radians()];
+    let step0 = straight_step();
     let rolls = par_map(&[-shift_px, shift_px], |&d| {
         let moved = vp1 + normal * d;
         let flat = Flat::of(moved, vehicles, opts)?;

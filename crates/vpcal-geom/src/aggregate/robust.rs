@@ -696,28 +696,18 @@ pub fn aggregate_with_scene(
     });
     // The straight edgelet fit held VP1 where it was placed; VP1's spread across the horizon
     // (its resamples') turns that fit's roll too (`edge::roll_vp1_sd_deg`).
-    let usable = usable
-        .zip(edge_opts)
-        .filter(|_| curved_fit.is_none())
-        .map(|(e, eo)| {
+    let usable = match (usable, edge_opts) {
+        (Some(e), Some(eo)) if curved_fit.is_none() => {
             let normal = Point2::new(-e.roll.sin(), e.roll.cos());
             let shift = samples
                 .as_ref()
-                .filter(|b| b.vp1_x.len() > 1)
-                .map_or(0.0, |b| {
-                    let across: Vec<f64> = b
-                        .vp1_x
-                        .iter()
-                        .zip(&b.vp1_y)
-                        .map(|(x, y)| (Point2::new(*x, *y) - vp1).dot(normal))
-                        .collect();
-                    half_p16_p84(&across)
-                });
+                .map_or(0.0, |b| b.vp1_spread_along(vp1, normal));
             let sd = edge::roll_vp1_sd_deg(&e, vp1, pp, &boxes, eo, shift);
             evidence.edgelet_roll_vp1_sd_deg = Some(sd).filter(|s| s.is_finite());
-            e.with_vp1_spread(sd)
-        })
-        .or(usable.filter(|_| curved_fit.is_some()));
+            Some(e.with_vp1_spread(sd))
+        }
+        (u, _) => u,
+    };
     let roll_from = RollFrom::of(curved_fit, usable, rays_roll);
     if let (RollFrom::Rays(rr), Some(own)) = (roll_from, evidence.rays_roll_own_deg) {
         x[1] = rr.roll(own.to_radians());
@@ -763,6 +753,7 @@ pub fn aggregate_with_scene(
     evidence.horizon_conflict_deg = conflict.map(|(_, d)| d.to_degrees());
     let vertical = vertical_fit.as_ref().map(|v| v as &dyn FocalSource);
     let sources: Vec<&dyn FocalSource> = match &curved_fit {
+        _ if conflict.is_some() => vec![],
         Some(c) => [Some(c as &dyn FocalSource), vertical]
             .into_iter()
             .flatten()
@@ -778,7 +769,6 @@ pub fn aggregate_with_scene(
         }
         None => vertical.into_iter().collect(),
     };
-    let sources = if conflict.is_some() { vec![] } else { sources };
     let focal = focal::fuse(range_px, &focal::cues_of(&sources))
         .ok_or_else(|| not_enough(format!("invalid focal range {range_px:?} px")))?;
     let carried = |s: &str| focal.carried_by.contains(&s);

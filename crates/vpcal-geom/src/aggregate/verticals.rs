@@ -616,17 +616,12 @@ pub fn fit(
     let own_window = opts.own_roll_window_deg.to_radians();
     let (own_score, own_lf, own) = search(&candidates, frame, ln_range, flat, own_window);
     let probe = OWN_ROLL_PROBE_DEG.to_radians();
-    let roll_profile = |r: f64| {
-        let mut best = f64::NEG_INFINITY;
-        for lf in grid(
-            ln_range[0],
-            ln_range[1],
-            ((ln_range[1] - ln_range[0]) / 0.04).ceil() as usize + 1,
-        ) {
-            best = best.max(log_likelihood(&candidates, frame.at(lf, r)));
-        }
-        best
-    };
+    let coarse_f = grid(
+        ln_range[0],
+        ln_range[1],
+        ((ln_range[1] - ln_range[0]) / 0.04).ceil() as usize + 1,
+    );
+    let roll_profile = |r: f64| best_over(&candidates, frame, &coarse_f, &[r], flat).0;
     let own_camera = frame.at(own_lf, own);
     let own_supporting: Vec<Candidate> = candidates
         .iter()
@@ -636,12 +631,12 @@ pub fn fit(
     let own_identified = (own - roll).abs() < own_window - 0.5f64.to_radians()
         && distinct_lines(&own_supporting, own_camera, 2.0 * pp.x) >= opts.min_supporting
         && own_score - roll_profile(own - probe).max(roll_profile(own + probe)) >= IDENTIFIED_DROP;
-    // The resamples' own rolls only where the own roll could contradict the horizon (their
-    // spread only lowers the contradiction): 30 searches over the wide window cost about
-    // two seconds on a view with 360 candidates.
-    // There it must also beat chance as the fit under the prior does, over the same wide
-    // window: a few segments meet somewhere within ±15° more easily than within the prior's
-    // reach (a rendered curve's 11 candidates put their own roll 14° off the truth).
+    // Where the own roll could contradict the horizon, it must also beat chance as the fit
+    // under the prior does, over the same wide window: a few segments meet somewhere within
+    // ±15° more easily than within the prior's reach (a rendered curve's 11 candidates put
+    // their own roll 14° off the truth). Only there are the chance draws searched and the
+    // resamples' own rolls measured (their spread only lowers the contradiction): 30
+    // searches over the wide window cost about two seconds on a view with 360 candidates.
     let could_contradict =
         own_identified && line_angle_diff(own - roll).abs() > HORIZON_CONFLICT_Z * prior_sd;
     let own_beats_chance = could_contradict && {
