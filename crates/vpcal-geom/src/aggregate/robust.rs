@@ -81,7 +81,7 @@ use super::focal::{
     self, focal_prior_range_widths, physical_focal_prior, FocalPosterior, FocalSource,
 };
 use super::line_angle_diff;
-use super::rays::{fit_camera, rays_focal, RayOptions, RaysRoll, Vp2Model};
+use super::rays::{fit_camera, rays_focal, RayOptions, RaysFocal, RaysRoll, Vp2Model};
 use super::scene_lines::{self, SceneLineOptions, SceneVp1};
 use super::sizes;
 use super::tracks::{self, CurveTest, RoadTracks, TrackLine, TrackOptions};
@@ -533,6 +533,10 @@ pub struct Scene<'a> {
 /// (`opts.scene_max_extra_deg`); with `opts.verticals` set, its vertical lines measure the
 /// focal length ([`verticals`]).
 ///
+/// The stages, each a function below with what it found as its result: the vehicles
+/// (`usable_vehicles`), VP1 (`place_vp1`), the horizon's roll (`place_horizon`), the focal
+/// posterior (`fuse_focal`) and the camera they make (`make_camera`).
+///
 /// # Errors
 /// As [`aggregate`].
 ///
@@ -541,28 +545,85 @@ pub struct Scene<'a> {
 pub fn aggregate_with_scene(
     pairs: &[VehicleVps],
     edgelets: &[Vec<Edgelet>],
-    scene_view: Scene,
+    scene: Scene,
     pp: Point2,
     opts: &RobustOptions,
 ) -> Result<RobustResult, AggregateError> {
-    let scene = scene_view.edgelets;
     assert!(
         edgelets.is_empty() || edgelets.len() == pairs.len(),
         "{} edgelet lists for {} pairs",
         edgelets.len(),
         pairs.len()
     );
-    let [width, height] = opts.image_size.unwrap_or([2.0 * pp.x, 2.0 * pp.y]);
-    if !(width > 0.0 && height > 0.0 && pp.is_finite()) {
+    let frame = opts.image_size.unwrap_or([2.0 * pp.x, 2.0 * pp.y]);
+    if !(frame[0] > 0.0 && frame[1] > 0.0 && pp.is_finite()) {
         return Err(not_enough(format!(
-            "invalid image size {width}x{height} or principal point {pp}"
+            "invalid image size {}x{} or principal point {pp}",
+            frame[0], frame[1]
         )));
     }
-    // The vehicles (`super::vehicles`), each pair with its physical vehicle for the
-    // bootstraps of the fits and of the edgelets.
+    let input = Input {
+        pairs,
+        edgelets,
+        scene,
+        pp,
+        frame,
+        opts,
+    };
+    let (unit, full, effective) = usable_vehicles(&input)?;
+    let prep = full.thinned(opts.max_fit_vehicles);
+    let mut evidence = Evidence {
+        pairs_in: pairs.len(),
+        pairs_used: full.centre.len(),
+        effective_vehicles: effective,
+        repeated_boxes: prep.repeated,
+        ..Evidence::default()
+    };
+    let mut rng = SplitMix(opts.seed ^ 0x5EED_CA1B);
+    // The tracks (`super::tracks`): VP1 evidence where straight, the road's shape.
+    let (boxes, tracked) = tracked_boxes(pairs, &opts.weighting());
+    let curve = opts.curve_test();
+    let road = RoadTracks::of(boxes, tracked, opts.tracks.as_ref(), frame, &curve);
+    let boxes = box_edgelets(pairs, edgelets, &unit, opts.min_score);
+    let placed = place_vp1(&input, &full, &prep, &road, &boxes, &mut rng)?;
+    placed.record(&road, &mut evidence);
+    let horizon = place_horizon(&input, &placed, &prep, &road, &boxes, &unit, &mut rng);
+    horizon.record(input.width(), &mut evidence);
+    let focal = fuse_focal(&input, &placed, &horizon, &road)?;
+    focal.record(&mut evidence);
+    make_camera(&input, &full, &prep, horizon, focal, evidence, road)
+}
+
+/// What [`aggregate_with_scene`] was given, for its stages.
+#[derive(Clone, Copy)]
+struct Input<'a> {
+    pairs: &'a [VehicleVps],
+    edgelets: &'a [Vec<Edgelet>],
+    scene: Scene<'a>,
+    pp: Point2,
+    /// Width and height of the frames, pixels.
+    frame: [f64; 2],
+    opts: &'a RobustOptions,
+}
+
+impl Input<'_> {
+    fn width(&self) -> f64 {
+        self.frame[0]
+    }
+
+    /// The focal posterior's prior range, pixels (the user's or the physical band).
+    fn range_px(&self) -> [f64; 2] {
+        focal_prior_range_widths(self.opts.focal_range_widths).map(|r| r * self.width())
+    }
+}
+
+/// The vehicles (`super::vehicles`): each pair's physical vehicle (the bootstraps' unit for
+/// the fits and the edgelets), and the usable pairs weighed, with their effective number;
+/// `Err` where too few are.
+fn usable_vehicles(input: &Input) -> Result<(Vec<usize>, Prepared, f64), AggregateError> {
+    let (pairs, opts) = (input.pairs, input.opts);
     let vehicles = vehicle_units(pairs);
-    let weighting = opts.weighting();
-    let full = prepare(pairs, &vehicles, &weighting, height);
+    let full = prepare(pairs, &vehicles, &opts.weighting(), input.frame[1]);
     // `+ 0.0` turns an empty sum's -0.0 into 0.0 for the messages.
     let effective: f64 = full.weight.iter().sum::<f64>() + 0.0;
     if full.centre.len() < 2 || effective < opts.min_effective_vehicles {
@@ -575,42 +636,46 @@ pub fn aggregate_with_scene(
             opts.min_score
         )));
     }
-    let prep = full.thinned(opts.max_fit_vehicles);
-    let mut evidence = Evidence {
-        pairs_in: pairs.len(),
-        pairs_used: full.centre.len(),
-        effective_vehicles: effective,
-        repeated_boxes: prep.repeated,
-        ..Evidence::default()
-    };
-    let mut rng = SplitMix(opts.seed ^ 0x5EED_CA1B);
-    // The tracks (`super::tracks`): VP1 evidence where straight, the road's shape.
-    let (boxes, tracked) = tracked_boxes(pairs, &weighting);
-    let frame = [width, height];
-    let road = RoadTracks::of(
-        boxes,
-        tracked,
-        opts.tracks.as_ref(),
-        frame,
-        &opts.curve_test(),
-    );
-    // VP1 (`super::vp1`): where the tracks' or the network's VP1 lines meet.
+    Ok((vehicles.0, full, effective))
+}
+
+/// VP1 and what placed it (`super::vp1`, then the moves of [`move_vp1`]), with the network's
+/// VP2 rays fitted around it (`super::rays`).
+struct PlacedVp1<'a> {
+    located: vp1::Located,
+    /// The rays' horizon model, around VP1 where the moves left it.
+    model: Vp2Model<'a>,
+    /// The rays' fit: `(ln f, roll, bias)`, and whether they were trusted.
+    x: [f64; 3],
+    rays_trusted: bool,
+    /// Untrusted, the rays' own roll (degrees) and its model, weighed against the physical
+    /// prior on the horizon's angle.
+    rays_roll: Option<(f64, RaysRoll)>,
+    moved: MovedVp1,
+    /// The edgelet and scene-line settings where there is something for them to fit.
+    edge_opts: Option<&'a EdgeletFitOptions>,
+    scene_opts: Option<&'a SceneLineOptions>,
+}
+
+/// VP1 where the tracks' or the network's VP1 lines meet (`super::vp1`), the network's VP2
+/// rays around it (trusted, they fit f, the roll and VP1 with it; else the roll and their bias
+/// are fitted with f held at the prior's middle), then moved by the edges along the vehicles
+/// and the scene's lines along the road ([`move_vp1`]).
+fn place_vp1<'a>(
+    input: &Input<'a>,
+    full: &Prepared,
+    prep: &'a Prepared,
+    road: &RoadTracks,
+    boxes: &[BoxEdgelets],
+    rng: &mut SplitMix,
+) -> Result<PlacedVp1<'a>, AggregateError> {
+    let (pp, opts, width) = (input.pp, input.opts, input.width());
     let choice = opts.vp1_choice();
-    let located =
-        vp1::locate(&full, &prep, &road, pp, width, &choice, &mut rng).map_err(not_enough)?;
-    evidence.track_lines = road.straight.len();
-    evidence.curved_tracks = road.curved_tracks;
-    evidence.road_curved = road.road_curved;
-    evidence.vp1_inliers = located.inliers;
-    evidence.vp1_from_tracks = located.lines.from_tracks;
-    evidence.vp1_ray_scatter_deg = located.network_scatter;
-    evidence.track_residual_deg = located.track_residual;
-    // The network's VP2 rays (`super::rays`): trusted, they fit f, the roll and VP1 with
-    // it; else the roll and their bias are fitted with f held at the prior's middle.
+    let located = vp1::locate(full, prep, road, pp, width, &choice, rng).map_err(not_enough)?;
     let model = Vp2Model {
         vp1: located.vp1,
         pp,
-        prep: &prep,
+        prep,
         opts: opts.ray_options(),
         f0: opts.focal_prior_ratio * width,
         fixed_bias: None,
@@ -618,35 +683,82 @@ pub fn aggregate_with_scene(
     };
     let lines = &located.lines;
     let fit = fit_camera(&model, lines, &lines.weight, &prep.weight, None);
-    let (vp1, mut x, rays_trusted) = (fit.vp1, fit.x, fit.trusted);
-    evidence.rays_trusted = rays_trusted;
-    // Untrusted, the rays' own roll is weighed against the physical prior on the horizon's
-    // angle (`RaysRoll`).
-    let rays_roll = fit.own_roll.map(|(own, rr)| {
-        evidence.rays_roll_own_deg = Some(own.to_degrees());
-        evidence.rays_roll_sd_deg = Some(rr.sd_deg);
-        rr
-    });
-    // The edges inside the vehicles' boxes (`super::edgelets`), and the scene's lines along
-    // the road (`super::scene_lines`), move VP1.
-    let boxes = box_edgelets(pairs, edgelets, &vehicles.0, opts.min_score);
+    let scene = input.scene.edgelets;
     let edge_opts = opts.edgelets.as_ref().filter(|_| !boxes.is_empty());
     let scene_opts = opts
         .scene_lines
         .as_ref()
         .filter(|_| !road.road_curved && !scene.is_empty());
-    let moved = move_vp1(vp1, lines, &boxes, edge_opts, scene, scene_opts, opts);
-    moved.record(&mut evidence);
-    let vp1 = moved.vp1;
-    let model = Vp2Model { vp1, ..model };
-    // The focal sources (`super::focal`).
-    let range_px = focal_prior_range_widths(opts.focal_range_widths).map(|r| r * width);
-    // Rays the VP2 points contradict still say something about f where VP2 is near: their
-    // likelihood over ln f (`rays_focal_likelihood`).
-    let rays = (!rays_trusted).then(|| rays_focal(&model, &prep.weight, range_px));
-    // The edges across the vehicles; where they say those edges are parallel in the image
-    // (a view looking almost straight down), they contradict rays that place VP2 near.
-    let edge_fit = edge_opts.and_then(|eo| edge::fit(vp1, pp, width, &boxes, x[1], eo, opts.seed));
+    let moved = move_vp1(fit.vp1, lines, boxes, edge_opts, scene, scene_opts, opts);
+    Ok(PlacedVp1 {
+        model: Vp2Model {
+            vp1: moved.vp1,
+            ..model
+        },
+        x: fit.x,
+        rays_trusted: fit.trusted,
+        rays_roll: fit.own_roll.map(|(own, rr)| (own.to_degrees(), rr)),
+        moved,
+        edge_opts,
+        scene_opts,
+        located,
+    })
+}
+
+impl PlacedVp1<'_> {
+    fn record(&self, road: &RoadTracks, e: &mut Evidence) {
+        e.track_lines = road.straight.len();
+        e.curved_tracks = road.curved_tracks;
+        e.road_curved = road.road_curved;
+        e.vp1_inliers = self.located.inliers;
+        e.vp1_from_tracks = self.located.lines.from_tracks;
+        e.vp1_ray_scatter_deg = self.located.network_scatter;
+        e.track_residual_deg = self.located.track_residual;
+        e.rays_trusted = self.rays_trusted;
+        e.rays_roll_own_deg = self.rays_roll.map(|(own, _)| own);
+        self.moved.record(e);
+    }
+}
+
+/// The horizon through VP1: its roll and what set it ([`RollFrom`]), with the bootstrap's
+/// resamples.
+struct Horizon<'a> {
+    /// The rays' model around the final VP1 (the curved-road fit's on a curved road).
+    model: Vp2Model<'a>,
+    /// `(ln f, roll, bias)`, the roll from [`RollFrom`].
+    x: [f64; 3],
+    /// The straight edgelet fit, and whether it says the edges across the vehicles are
+    /// parallel in the image ([`PARALLEL_EDGES_VP2_WIDTHS`]).
+    edge_fit: Option<edge::EdgeletFit>,
+    edges_parallel: bool,
+    /// That fit where its roll is usable, its spread with VP1's.
+    usable: Option<edge::EdgeletFit>,
+    curved: Option<CurvedFit>,
+    samples: Option<Samples>,
+    roll_from: RollFrom,
+    /// The untrusted rays' roll model with its sampling spread (`rays_roll_sampling_sd_deg`).
+    rays_roll: Option<RaysRoll>,
+    rays_roll_sampling_sd_deg: Option<f64>,
+    edgelet_roll_vp1_sd_deg: Option<f64>,
+}
+
+/// The horizon's roll (`super::edgelets`, `super::rays`): the straight edgelet fit where its
+/// roll is usable, on a curved road the curved-road fit (each car's VP1 from its track's
+/// tangent), else the rays' own roll under its prior; then the bootstrap's resamples
+/// (`super::bootstrap`), whose VP1 spread widens the edgelets' roll and whose rays' rolls
+/// widen the rays'.
+fn place_horizon<'a>(
+    input: &Input,
+    placed: &PlacedVp1<'a>,
+    prep: &Prepared,
+    road: &RoadTracks,
+    boxes: &[BoxEdgelets],
+    unit: &[usize],
+    rng: &mut SplitMix,
+) -> Horizon<'a> {
+    let (pp, opts, width) = (input.pp, input.opts, input.width());
+    let (mut x, vp1, edge_opts) = (placed.x, placed.model.vp1, placed.edge_opts);
+    let edge_fit = edge_opts.and_then(|eo| edge::fit(vp1, pp, width, boxes, x[1], eo, opts.seed));
     let edges_parallel = edge_fit.is_some_and(|e| {
         let w = (e.vp2 - pp).norm() / width;
         w.is_nan() || w > PARALLEL_EDGES_VP2_WIDTHS
@@ -657,83 +769,155 @@ pub fn aggregate_with_scene(
     }
     // On a curved road every car has its own VP1 on the horizon: the horizon and the focal
     // length from the cars' track tangents and edgelets together.
-    let curved_fit = edge_opts
-        .filter(|_| road.road_curved)
-        .and_then(|eo| curved_road_fit(&road, edgelets, &vehicles.0, frame, pp, x[1], eo, opts));
-    let (model, vp1) = match curved_fit {
+    let curved = edge_opts.filter(|_| road.road_curved).and_then(|eo| {
+        curved_road_fit(road, input.edgelets, unit, input.frame, pp, x[1], eo, opts)
+    });
+    let model = match curved {
         Some(c) => {
             x[1] = c.roll;
-            (
-                Vp2Model {
-                    vp1: c.vp1,
-                    ..model
-                },
-                c.vp1,
-            )
+            Vp2Model {
+                vp1: c.vp1,
+                ..placed.model
+            }
         }
-        None => (model, vp1),
+        None => placed.model,
     };
-    // The bootstrap's resamples (`super::bootstrap`): the focal lengths of trusted rays, the
-    // horizon and VP1.
+    // The bootstrap's resamples: the focal lengths of trusted rays, the horizon and VP1.
     let samples = (opts.bootstrap > 0).then(|| {
-        let edges = moved.edges.and(edge_opts).map(|eo| (boxes.as_slice(), eo));
-        let scene = moved.scene.and(scene_opts).map(|so| (scene, so));
-        let (p1, n) = (located.p1, opts.bootstrap);
-        bootstrap(&model, &prep, lines, p1, x, edges, scene, n, &mut rng)
+        let moved = &placed.moved;
+        let edges = moved.edges.and(edge_opts).map(|eo| (boxes, eo));
+        let scene = moved
+            .scene
+            .and(placed.scene_opts)
+            .map(|so| (input.scene.edgelets, so));
+        let (lines, p1, n) = (&placed.located.lines, placed.located.p1, opts.bootstrap);
+        bootstrap(&model, prep, lines, p1, x, edges, scene, n, rng)
     });
     // The rays' own roll moves with the vehicles drawn and with VP1, through which their
-    // horizon runs: its spread over the resamples joins its error model, and where the rays
-    // set the roll it is weighed against the prior again.
-    let rays_roll = rays_roll.map(|rr| {
-        let spread = samples
-            .as_ref()
-            .filter(|b| b.rays_roll_own_deg.len() > 1)
-            .map(|b| half_p16_p84(&b.rays_roll_own_deg));
-        evidence.rays_roll_sampling_sd_deg = spread;
-        let rr = spread.map_or(rr, |s| rr.with_sampling(s));
-        evidence.rays_roll_sd_deg = Some(rr.sd_deg);
-        rr
-    });
+    // horizon runs: its spread over the resamples joins its error model.
+    let spread = samples
+        .as_ref()
+        .filter(|b| b.rays_roll_own_deg.len() > 1)
+        .map(|b| half_p16_p84(&b.rays_roll_own_deg));
+    let rays_roll = placed
+        .rays_roll
+        .map(|(_, rr)| spread.map_or(rr, |s| rr.with_sampling(s)));
     // The straight edgelet fit held VP1 where it was placed; VP1's spread across the horizon
     // (its resamples') turns that fit's roll too (`edge::roll_vp1_sd_deg`).
+    let mut edgelet_roll_vp1_sd_deg = None;
     let usable = match (usable, edge_opts) {
-        (Some(e), Some(eo)) if curved_fit.is_none() => {
+        (Some(e), Some(eo)) if curved.is_none() => {
             let normal = Point2::new(-e.roll.sin(), e.roll.cos());
             let shift = samples
                 .as_ref()
                 .map_or(0.0, |b| b.vp1_spread_along(vp1, normal));
-            let sd = edge::roll_vp1_sd_deg(&e, vp1, pp, &boxes, eo, shift);
-            evidence.edgelet_roll_vp1_sd_deg = Some(sd).filter(|s| s.is_finite());
+            let sd = edge::roll_vp1_sd_deg(&e, vp1, pp, boxes, eo, shift);
+            edgelet_roll_vp1_sd_deg = Some(sd).filter(|s| s.is_finite());
             Some(e.with_vp1_spread(sd))
         }
         (u, _) => u,
     };
-    let roll_from = RollFrom::of(curved_fit, usable, rays_roll);
-    if let (RollFrom::Rays(rr), Some(own)) = (roll_from, evidence.rays_roll_own_deg) {
+    let roll_from = RollFrom::of(curved, usable, rays_roll);
+    // Where the rays set the roll it is weighed against the prior again.
+    if let (RollFrom::Rays(rr), Some((own, _))) = (roll_from, placed.rays_roll) {
         x[1] = rr.roll(own.to_radians());
     }
-    // Each cue where its model holds: on a curved road only the curved fit (every car has
-    // its own VP2, so neither the rays nor the straight edgelet fit apply); the rays and the
-    // edges across the vehicles not where those edges are parallel in the image (a view
-    // straight down, where f cannot be observed).
-    let trusted = rays_trusted.then(|| trusted_rays(x[0].exp(), samples.as_ref()));
+    Horizon {
+        model,
+        x,
+        edge_fit,
+        edges_parallel,
+        usable,
+        curved,
+        samples,
+        roll_from,
+        rays_roll,
+        rays_roll_sampling_sd_deg: spread,
+        edgelet_roll_vp1_sd_deg,
+    }
+}
+
+impl Horizon<'_> {
+    /// Writes what the horizon's stage found; `width`: of the frames, pixels.
+    fn record(&self, width: f64, e: &mut Evidence) {
+        e.rays_roll_sampling_sd_deg = self.rays_roll_sampling_sd_deg;
+        if let Some(rr) = self.rays_roll {
+            e.rays_roll_sd_deg = Some(rr.sd_deg);
+        }
+        e.edgelet_roll_vp1_sd_deg = self.edgelet_roll_vp1_sd_deg;
+        if let Some(f) = self.edge_fit {
+            e.edgelets = f.edgelets;
+            e.edgelet_vehicles = f.vehicles;
+            e.edgelet_focal_px = Some(f.focal_px);
+            e.edgelet_roll_sd_deg = Some(f.roll_sd_deg);
+            e.edgelet_roll_deg = Some(f.roll.to_degrees());
+            e.edgelet_roll_turn_sd_deg = Some(f.roll_turn_sd_deg);
+            e.edgelet_focal_log_spread = Some(f.focal_log_spread());
+            e.edgelet_vp2_widths = Some((f.vp2 - self.model.pp).norm() / width);
+            e.edgelet_focal_bias_log_spread = Some(f.focal_bias_log_spread);
+        }
+        e.roll_from_edgelets = self.usable.is_some();
+        e.curved_fit = self.curved.is_some();
+        e.curved_vehicles = self.curved.map_or(0, |c| c.vehicles);
+    }
+
+    /// The roll's standard deviation, degrees ([`RollFrom::sd_deg`]).
+    fn roll_sd_deg(&self) -> f64 {
+        self.roll_from
+            .sd_deg(self.samples.as_ref(), self.x[1].to_degrees())
+    }
+}
+
+/// The focal sources (`super::focal`) and their posterior.
+struct FocalCues {
+    /// The untrusted rays' likelihood of f.
+    rays: Option<RaysFocal>,
+    verticals: Option<verticals::VerticalsFit>,
+    /// The plumb lines' roll against the horizon's: `(z, difference)`, and the difference
+    /// where it is a conflict ([`verticals::HORIZON_CONFLICT_Z`]).
+    against: Option<(f64, f64)>,
+    conflict: Option<(f64, f64)>,
+    posterior: FocalPosterior,
+}
+
+/// Each focal cue where its model holds, and their posterior: on a curved road only the
+/// curved fit (every car has its own VP2, so neither the rays nor the straight edgelet fit
+/// apply); the rays and the edges across the vehicles not where those edges are parallel in
+/// the image (a view straight down, where f cannot be observed); the scene's vertical lines
+/// wherever the horizon is placed; none where the plumb lines contradict the horizon.
+fn fuse_focal(
+    input: &Input,
+    placed: &PlacedVp1,
+    horizon: &Horizon,
+    road: &RoadTracks,
+) -> Result<FocalCues, AggregateError> {
+    let (pp, opts) = (input.pp, input.opts);
+    let range_px = input.range_px();
+    let weight = &placed.model.prep.weight;
+    // Rays the VP2 points contradict still say something about f where VP2 is near: their
+    // likelihood over ln f (`rays_focal_likelihood`), around VP1 before a curved-road fit.
+    let rays = (!placed.rays_trusted).then(|| rays_focal(&placed.model, weight, range_px));
+    let trusted = placed
+        .rays_trusted
+        .then(|| trusted_rays(horizon.x[0].exp(), horizon.samples.as_ref()));
     // The scene's vertical lines need only the horizon: VP1 on it and its roll, with the
     // roll's spread (the edgelets' where they set it, the rays' posterior's where they did,
     // else the bootstrap's).
-    let horizon_placed = curved_fit.is_some() || !road.road_curved;
-    let roll_sd_deg = roll_from.sd_deg(samples.as_ref(), x[1].to_degrees());
-    let vertical_fit = opts
+    let horizon_placed = horizon.curved.is_some() || !road.road_curved;
+    let roll_sd_deg = horizon.roll_sd_deg();
+    let (vp1, roll) = (horizon.model.vp1, horizon.x[1]);
+    let verticals = opts
         .verticals
         .as_ref()
-        .filter(|_| horizon_placed && !scene_view.segments.is_empty())
+        .filter(|_| horizon_placed && !input.scene.segments.is_empty())
         .and_then(|vo| {
             let support = focal::support(range_px);
             let roll_sd = roll_sd_deg.to_radians();
             verticals::fit(
-                scene_view.segments,
+                input.scene.segments,
                 vp1,
                 pp,
-                x[1],
+                roll,
                 roll_sd,
                 support,
                 vo,
@@ -744,22 +928,20 @@ pub fn aggregate_with_scene(
     // beyond the road's cross slope and both errors, the horizon (or the verticals) is wrong,
     // and no focal cue is used: every one (the verticals under the horizon's roll, the
     // edgelets' and the rays' VP2 on it, the curved fit's one plane) rests on that horizon.
-    let against = vertical_fit
+    let against = verticals
         .as_ref()
         .zip(opts.verticals.as_ref())
-        .and_then(|(v, vo)| v.against_horizon(x[1], roll_sd_deg.to_radians(), vo));
+        .and_then(|(v, vo)| v.against_horizon(roll, roll_sd_deg.to_radians(), vo));
     let conflict = against.filter(|(z, _)| z.abs() > verticals::HORIZON_CONFLICT_Z);
-    evidence.verticals_roll_z = against.map(|(z, _)| z);
-    evidence.horizon_conflict_deg = conflict.map(|(_, d)| d.to_degrees());
-    let vertical = vertical_fit.as_ref().map(|v| v as &dyn FocalSource);
-    let sources: Vec<&dyn FocalSource> = match &curved_fit {
+    let vertical = verticals.as_ref().map(|v| v as &dyn FocalSource);
+    let sources: Vec<&dyn FocalSource> = match &horizon.curved {
         _ if conflict.is_some() => vec![],
         Some(c) => [Some(c as &dyn FocalSource), vertical]
             .into_iter()
             .flatten()
             .collect(),
-        None if !road.road_curved && !edges_parallel => {
-            let edges = usable.as_ref().map(|e| e as &dyn FocalSource);
+        None if !road.road_curved && !horizon.edges_parallel => {
+            let edges = horizon.usable.as_ref().map(|e| e as &dyn FocalSource);
             let trusted = trusted.as_ref().map(|t| t as &dyn FocalSource);
             let rays = rays.as_ref().map(|r| r as &dyn FocalSource);
             [edges, trusted, rays, vertical]
@@ -769,50 +951,65 @@ pub fn aggregate_with_scene(
         }
         None => vertical.into_iter().collect(),
     };
-    let focal = focal::fuse(range_px, &focal::cues_of(&sources))
+    let posterior = focal::fuse(range_px, &focal::cues_of(&sources))
         .ok_or_else(|| not_enough(format!("invalid focal range {range_px:?} px")))?;
-    let carried = |s: &str| focal.carried_by.contains(&s);
-    if let Some(r) = &rays {
-        evidence.rays_focal_px = Some(r.fit[0].exp());
-        evidence.rays_scatter_deg = Some(r.scatter_deg);
-        evidence.rays_vp2_sd_deg = Some(r.sd_deg).filter(|s| s.is_finite());
-        evidence.rays_posterior_px = r.posterior;
+    Ok(FocalCues {
+        rays,
+        verticals,
+        against,
+        conflict,
+        posterior,
+    })
+}
+
+impl FocalCues {
+    fn record(&self, e: &mut Evidence) {
+        let carried = |s: &str| self.posterior.carried_by.contains(&s);
+        if let Some(r) = &self.rays {
+            e.rays_focal_px = Some(r.fit[0].exp());
+            e.rays_scatter_deg = Some(r.scatter_deg);
+            e.rays_vp2_sd_deg = Some(r.sd_deg).filter(|s| s.is_finite());
+            e.rays_posterior_px = r.posterior;
+        }
+        e.focal_from_rays = carried("network_rays");
+        if let Some(v) = &self.verticals {
+            e.vertical_candidates = v.candidates;
+            e.vertical_supporting = v.supporting;
+            e.verticals_focal_px = v.identified.then_some(v.focal_px);
+            e.verticals_roll_deg = v.own_roll.map(f64::to_degrees);
+            e.verticals_roll_sd_deg = v
+                .own_roll
+                .map(|_| v.own_roll_sd.to_degrees())
+                .filter(|s| s.is_finite());
+        }
+        e.verticals_roll_z = self.against.map(|(z, _)| z);
+        e.horizon_conflict_deg = self.conflict.map(|(_, d)| d.to_degrees());
+        e.focal_from_verticals = carried("verticals");
+        e.focal_from_edgelets = carried("edgelets");
+        e.curved_focal = carried("curved_edgelets");
     }
-    evidence.focal_from_rays = carried("network_rays");
-    if let Some(v) = &vertical_fit {
-        evidence.vertical_candidates = v.candidates;
-        evidence.vertical_supporting = v.supporting;
-        evidence.verticals_focal_px = v.identified.then_some(v.focal_px);
-        evidence.verticals_roll_deg = v.own_roll.map(f64::to_degrees);
-        evidence.verticals_roll_sd_deg = v
-            .own_roll
-            .map(|_| v.own_roll_sd.to_degrees())
-            .filter(|s| s.is_finite());
-    }
-    evidence.focal_from_verticals = carried("verticals");
-    if let Some(e) = edge_fit {
-        evidence.edgelets = e.edgelets;
-        evidence.edgelet_vehicles = e.vehicles;
-        evidence.edgelet_focal_px = Some(e.focal_px);
-        evidence.edgelet_roll_sd_deg = Some(e.roll_sd_deg);
-        evidence.edgelet_roll_deg = Some(e.roll.to_degrees());
-        evidence.edgelet_roll_turn_sd_deg = Some(e.roll_turn_sd_deg);
-        evidence.edgelet_focal_log_spread = Some(e.focal_log_spread());
-        evidence.edgelet_vp2_widths = Some((e.vp2 - pp).norm() / width);
-        evidence.edgelet_focal_bias_log_spread = Some(e.focal_bias_log_spread);
-    }
-    evidence.roll_from_edgelets = usable.is_some();
-    evidence.focal_from_edgelets = carried("edgelets");
-    evidence.curved_fit = curved_fit.is_some();
-    evidence.curved_focal = carried("curved_edgelets");
-    evidence.curved_vehicles = curved_fit.map_or(0, |c| c.vehicles);
-    // Where f moved off the value the VP2 model held, the roll and the rays' bias are
-    // refitted with f held there (unless the edgelets set the roll), the roll weighed
-    // against its prior again.
+}
+
+/// The camera of VP1, the horizon's roll and the focal posterior's f: where f moved off the
+/// value the VP2 model held, the roll and the rays' bias are refitted with f held there
+/// (unless another source set the roll), the roll weighed against its prior again; then the
+/// horizon against the vehicles (`super::sizes`) and the spread of the estimate.
+fn make_camera(
+    input: &Input,
+    full: &Prepared,
+    prep: &Prepared,
+    horizon: Horizon,
+    cues: FocalCues,
+    mut evidence: Evidence,
+    road: RoadTracks,
+) -> Result<RobustResult, AggregateError> {
+    let (pp, opts) = (input.pp, input.opts);
+    let (focal, roll_from, mut x) = (cues.posterior, horizon.roll_from, horizon.x);
     let model = Vp2Model {
         f0: focal.focal_px,
-        ..model
+        ..horizon.model
     };
+    let vp1 = model.vp1;
     if let (true, RollFrom::Rays(rr)) = (focal.measured, roll_from) {
         x = Vp2Model {
             fixed_ln_f: Some(focal.focal_px.ln()),
@@ -844,7 +1041,7 @@ pub fn aggregate_with_scene(
         &full.weight,
         calibration.horizon,
         pp,
-        frame,
+        input.frame,
         opts.max_above_horizon,
     )
     .map_err(not_enough)?;
@@ -858,7 +1055,7 @@ pub fn aggregate_with_scene(
             line_angle_diff(**a - d.y.atan2(d.x) - x[2]).abs() < 3.0 * s2
         })
         .count();
-    let confidence = samples.and_then(|b| {
+    let confidence = horizon.samples.and_then(|b| {
         // Where an edgelet fit carried f, its bootstrap is f's.
         let edge_focal = match roll_from {
             RollFrom::Curved(c) if evidence.curved_focal => Some([c.focal_px_p16, c.focal_px_p84]),
@@ -869,8 +1066,10 @@ pub fn aggregate_with_scene(
         };
         let horizon_sd = roll_from.sd_deg(Some(&b), calibration.horizon.angle().to_degrees());
         // Contradicted by the plumb lines, the horizon is known no better than the two differ.
-        let horizon_sd = conflict.map_or(horizon_sd, |(_, d)| horizon_sd.hypot(d.to_degrees()));
-        confidence(&b, &model, &prep, horizon_sd, edge_focal)
+        let horizon_sd = cues
+            .conflict
+            .map_or(horizon_sd, |(_, d)| horizon_sd.hypot(d.to_degrees()));
+        confidence(&b, &model, prep, horizon_sd, edge_focal)
     });
     Ok(RobustResult {
         calibration,
