@@ -848,6 +848,12 @@ proptest! {
 /// (its VP1) or up (VP3), with 0.3° of noise; the edges across each car turned towards its
 /// VP1 as `edgelets::edge_turn` says.
 fn cars_on_a_curve() -> (Scene, Vec<(Tangent, Vec<Edgelet>)>) {
+    cars_on_a_curve_turned(0.0)
+}
+
+/// [`cars_on_a_curve`], with the edges across each car turned `extra` radians more towards its
+/// VP1 than `edgelets::edge_turn` says.
+fn cars_on_a_curve_turned(extra: f64) -> (Scene, Vec<(Tangent, Vec<Edgelet>)>) {
     let scene = Scene::new(1400.0, 0.35, 2f64.to_radians(), 0.3, 10.0);
     let radius = 80.0;
     let mut rng = Lcg(21);
@@ -895,8 +901,8 @@ fn cars_on_a_curve() -> (Scene, Vec<(Tangent, Vec<Edgelet>)>) {
             if k < 20 {
                 // The edges across the car turn towards the direction to its own VP1.
                 let vp1 = scene.vp(d);
-                angle +=
-                    edgelets::edge_turn(line_angle_diff((vp1.y - p.y).atan2(vp1.x - p.x) - angle));
+                let alpha = line_angle_diff((vp1.y - p.y).atan2(vp1.x - p.x) - angle);
+                angle += edgelets::edge_turn(alpha) + extra * alpha.signum();
             }
             edgelets.push(Edgelet {
                 x: p.x,
@@ -974,6 +980,28 @@ fn on_a_curved_road_each_cars_own_vp1_gives_the_horizon_and_focal_length() {
     assert_eq!(fit.vehicles, 80);
     // Too few vehicles: no fit.
     assert!(fit_curved(scene.pp, 1920.0, 1080.0, &vehicles[..10], 0.0, &opts, 5).is_none());
+}
+
+#[test]
+fn the_curved_fits_roll_spread_holds_what_a_turn_of_the_edges_moves() {
+    // The edges across the cars turned a degree more than the model says: the fit's roll
+    // moves by about what its turn probes measured per degree (`roll_turn_sd_deg` is that
+    // per-degree move times `EDGE_TURN_SD_DEG`), which its bootstrap alone does not see.
+    let opts = EdgeletFitOptions::default();
+    let (scene, cars) = cars_on_a_curve_turned(0.0);
+    let fit = fit_cars(&scene, &cars, &opts);
+    let (scene_t, turned) = cars_on_a_curve_turned(1f64.to_radians());
+    let moved = line_deg(fit_cars(&scene_t, &turned, &opts).roll - fit.roll).abs();
+    let per_degree = fit.roll_turn_sd_deg / edgelets::EDGE_TURN_SD_DEG;
+    assert!(
+        moved > 0.5 * per_degree && moved < 2.0 * per_degree,
+        "a degree's turn moved the roll {moved}°, the probes said {per_degree}°: {fit:?}"
+    );
+    assert!(
+        moved > fit.roll_sd_deg,
+        "{moved}° within the bootstrap's spread: {fit:?}"
+    );
+    assert!(fit.roll_total_sd_deg() > fit.roll_sd_deg);
 }
 
 #[test]

@@ -319,7 +319,7 @@ impl FocalSource for EdgeletFit {
     }
 }
 
-/// The curved-road fit's focal length, from its bootstrap.
+/// The curved-road fit's focal length, from its bootstrap and the edges' turn.
 impl FocalSource for CurvedFit {
     fn name(&self) -> &'static str {
         "curved_edgelets"
@@ -330,7 +330,7 @@ impl FocalSource for CurvedFit {
             name: self.name(),
             focal_px: self.focal_px,
             bootstrap_px: [self.focal_px_p16, self.focal_px_p84],
-            turn: 0.0,
+            turn: self.focal_bias_log_spread * EDGE_TURN_SD_DEG,
         }
         .likelihood()
     }
@@ -727,6 +727,18 @@ pub struct CurvedFit {
     pub roll_sd_deg: f64,
     pub focal_px_p16: f64,
     pub focal_px_p84: f64,
+    /// What the uncertainty of the edges' systematic turn moves the roll (degrees) and, per
+    /// degree of turn, `ln f`: as [`EdgeletFit::roll_turn_sd_deg`] and
+    /// [`EdgeletFit::focal_bias_log_spread`].
+    pub roll_turn_sd_deg: f64,
+    pub focal_bias_log_spread: f64,
+}
+
+impl CurvedFit {
+    /// The roll's spread, degrees: its bootstrap's and the edges' turn's together.
+    pub fn roll_total_sd_deg(&self) -> f64 {
+        self.roll_sd_deg.hypot(self.roll_turn_sd_deg)
+    }
 }
 
 /// Vehicles with their edgelets, flattened: `range[g]` of `point`/`angle` belongs to
@@ -778,9 +790,10 @@ impl CurvedFlat {
     /// `roll`; vehicle `g`'s VP1 is where its tangent meets the horizon, its VP2 the point of
     /// the horizon orthogonal to that VP1 for focal length f, and VP3 the vertical one. An
     /// edgelet within `ex1` of the direction to its VP1 is scored against it, any other
-    /// against the nearer of VP2 (turned back by the edges' systematic turn, as in [`fit`])
-    /// and VP3 (vertical edges would otherwise pull the fit).
-    fn cost(&self, gw: &[f64], pp: Point2, x: &[f64], s: f64, ex1: f64) -> f64 {
+    /// against the nearer of VP2 (turned back by the edges' systematic turn, as in [`fit`],
+    /// and by `turn` radians more away from its VP1) and VP3 (vertical edges would otherwise
+    /// pull the fit).
+    fn cost(&self, gw: &[f64], pp: Point2, x: &[f64], s: f64, ex1: f64, turn: f64) -> f64 {
         let h = Point2::new(x[1].cos(), x[1].sin());
         let n = Point2::new(-h.y, h.x);
         let h0 = Point2::new(pp.x, x[2]);
@@ -813,7 +826,8 @@ impl CurvedFlat {
                     // An edge across the vehicle, turned back by the edges' systematic turn
                     // towards its VP1 (as the straight fit's; `r1` is its angle from that
                     // direction, the opposite sign of `edge_turn`'s).
-                    let r2 = line_angle_diff(ang - edge_turn(-r1) - d2.y.atan2(d2.x)).abs();
+                    let ang2 = ang - edge_turn(-r1) - turn * r1.signum();
+                    let r2 = line_angle_diff(ang2 - d2.y.atan2(d2.x)).abs();
                     let r3 = line_angle_diff(ang - d3.y.atan2(d3.x)).abs();
                     r2.min(r3)
                 } / s;
@@ -886,7 +900,7 @@ pub fn fit_curved(
             })
         })
         .collect();
-    let costs = par_map(&grid, |x| coarse.cost(&coarse_weight, pp, x, s, ex1));
+    let costs = par_map(&grid, |x| coarse.cost(&coarse_weight, pp, x, s, ex1, 0.0));
     let mut best = (f64::INFINITY, [0.0; 3]);
     for (x, c) in grid.into_iter().zip(costs) {
         if c < best.0 {
@@ -895,7 +909,7 @@ pub fn fit_curved(
     }
     let step0 = [0.05, 0.3f64.to_radians(), 0.01 * height];
     let x = nelder_mead(
-        |x| full.cost(&weight, pp, x, s, ex1),
+        |x| full.cost(&weight, pp, x, s, ex1, 0.0),
         &best.1,
         &step0,
         CURVED_FIT_ITERATIONS,
@@ -906,7 +920,7 @@ pub fn fit_curved(
     // fit's: they spread around the coarse fit, and are moved onto the full fit by the ratio
     // of the two (otherwise the interval can miss its own estimate).
     let centre = nelder_mead(
-        |x| coarse.cost(&coarse_weight, pp, x, s, ex1),
+        |x| coarse.cost(&coarse_weight, pp, x, s, ex1, 0.0),
         &x,
         &step0,
         REFIT_ITERATIONS,
@@ -926,7 +940,7 @@ pub fn fit_curved(
         .collect();
     let refits = par_map(&resampled, |w| {
         nelder_mead(
-            |x| coarse.cost(w, pp, x, s, ex1),
+            |x| coarse.cost(w, pp, x, s, ex1, 0.0),
             &centre,
             &step0,
             REFIT_ITERATIONS,
@@ -956,6 +970,22 @@ pub fn fit_curved(
     let (hd, u) = vp2_direction(vp1, pp, x[0], x[1]);
     let vp2 = vp1 + hd / u;
     let (p16, p84, roll_sd_deg) = bootstrap_spread(fs, &rolls);
+    // What a systematic turn of the edges across the vehicles moves, as in the straight fit.
+    let probe = 1f64.to_radians();
+    let turned: Vec<Vec<f64>> = par_map(&[-probe, probe], |&turn| {
+        nelder_mead(
+            |xt| full.cost(&weight, pp, xt, s, ex1, turn),
+            &x,
+            &step0,
+            REFIT_ITERATIONS,
+        )
+        .x
+    });
+    let focal_bias_log_spread = 0.5 * (turned[0][0] - turned[1][0]).abs();
+    let roll_per_deg = 0.5
+        * line_angle_diff(turned[0][1] - turned[1][1])
+            .abs()
+            .to_degrees();
     // A fit that left the grid's range of focal lengths or rolls found no curve's camera.
     let inside = (lo..=hi).contains(&x[0])
         && line_angle_diff(x[1] - roll0).abs() <= CURVED_ROLL_LIMIT_DEG.to_radians();
@@ -969,6 +999,8 @@ pub fn fit_curved(
         roll_sd_deg,
         focal_px_p16: p16,
         focal_px_p84: p84,
+        roll_turn_sd_deg: roll_per_deg * EDGE_TURN_SD_DEG,
+        focal_bias_log_spread,
     })
 }
 

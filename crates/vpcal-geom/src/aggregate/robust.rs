@@ -1117,7 +1117,7 @@ impl RollFrom {
     /// with fewer than two).
     fn sd_deg(&self, samples: Option<&Samples>, roll_deg: f64) -> f64 {
         match self {
-            RollFrom::Curved(c) => c.roll_sd_deg,
+            RollFrom::Curved(c) => c.roll_total_sd_deg(),
             RollFrom::Edgelets(e) => e.roll_total_sd_deg(),
             RollFrom::Rays(r) => r.sd_after_deg(),
             RollFrom::Bootstrap => samples
