@@ -791,8 +791,8 @@ impl CurvedFlat {
     /// the horizon orthogonal to that VP1 for focal length f, and VP3 the vertical one. An
     /// edgelet within `ex1` of the direction to its VP1 is scored against it, any other
     /// against the nearer of VP2 (turned back by the edges' systematic turn, as in [`fit`],
-    /// and by `turn` radians more away from its VP1) and VP3 (vertical edges would otherwise
-    /// pull the fit).
+    /// then `turn` radians towards its VP1: a probe of that turn's uncertainty) and VP3
+    /// (vertical edges would otherwise pull the fit).
     fn cost(&self, gw: &[f64], pp: Point2, x: &[f64], s: f64, ex1: f64, turn: f64) -> f64 {
         let h = Point2::new(x[1].cos(), x[1].sin());
         let n = Point2::new(-h.y, h.x);

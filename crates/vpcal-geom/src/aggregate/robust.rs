@@ -183,7 +183,10 @@ pub struct RobustOptions {
     /// `curved_max_se_deg` ([`TrackLine::bend_se_deg`]). The motion detector's boxes jitter:
     /// its long tracks on the suite's curves have standard errors of 1.2-1.7°, where exact
     /// boxes have 0.1-0.6°, so 2° (with 3 tracks) lets 6-s clips of two of the three curves
-    /// tell; the share and the t-statistic still keep the straight roads straight.
+    /// tell; the share and the t-statistic still keep the straight roads straight. Where
+    /// at least `min_track_lines` straight tracks meet at no one VP1, this many bent ones
+    /// make the road curved whatever their share: the road curves through part of the view
+    /// (two of four unseen rendered curves, docs/accuracy.md §32).
     pub min_curved_tracks: usize,
     pub curved_max_se_deg: f64,
     /// Fit the horizon's roll (and, where VP2 is near enough, the focal length) to edgelets
@@ -583,9 +586,9 @@ pub fn aggregate_with_scene(
     // The tracks (`super::tracks`): VP1 evidence where straight, the road's shape.
     let (boxes, tracked) = tracked_boxes(pairs, &opts.weighting());
     let curve = opts.curve_test();
-    let road = RoadTracks::of(boxes, tracked, opts.tracks.as_ref(), frame, &curve);
+    let mut road = RoadTracks::of(boxes, tracked, opts.tracks.as_ref(), frame, &curve);
     let boxes = box_edgelets(pairs, edgelets, &unit, opts.min_score);
-    let placed = place_vp1(&input, &full, &prep, &road, &boxes, &mut rng)?;
+    let placed = place_vp1(&input, &full, &prep, &mut road, &boxes, &mut rng)?;
     placed.record(&road, &mut evidence);
     let horizon = place_horizon(&input, &placed, &prep, &road, &boxes, &unit, &mut rng);
     horizon.record(input.width(), &mut evidence);
@@ -665,13 +668,19 @@ fn place_vp1<'a>(
     input: &Input<'a>,
     full: &Prepared,
     prep: &'a Prepared,
-    road: &RoadTracks,
+    road: &mut RoadTracks,
     boxes: &[BoxEdgelets],
     rng: &mut SplitMix,
 ) -> Result<PlacedVp1<'a>, AggregateError> {
     let (pp, opts, width) = (input.pp, input.opts, input.width());
     let choice = opts.vp1_choice();
     let located = vp1::locate(full, prep, road, pp, width, &choice, rng).map_err(not_enough)?;
+    // Straight tracks that do not meet at one VP1, while at least `min_curved_tracks` bend
+    // alike: the road curves through part of the view, and the share test had counted the
+    // straight stretch's tracks against it.
+    if located.tracks_disagree && road.curved_tracks >= opts.min_curved_tracks.max(1) {
+        road.road_curved = true;
+    }
     let model = Vp2Model {
         vp1: located.vp1,
         pp,

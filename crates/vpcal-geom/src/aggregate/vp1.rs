@@ -278,6 +278,8 @@ pub(super) struct Located {
     /// and of the straight tracks' lines around theirs, degrees.
     pub network_scatter: Option<f64>,
     pub track_residual: Option<f64>,
+    /// Enough straight tracks to place VP1 (`min_track_lines`), and they do not meet at one.
+    pub tracks_disagree: bool,
 }
 
 /// VP1 from the straight tracks where there are enough that agree on one and the network's
@@ -321,6 +323,7 @@ pub(super) fn locate(
         })
         .flatten();
     let track_residual = tracked.as_ref().map(|t| t.3);
+    let tracks_disagree = straight.len() >= choice.min_track_lines && tracked.is_none();
     let use_tracks = match (&tracked, network_scatter) {
         _ if road.road_curved => false,
         (None, _) => false,
@@ -357,6 +360,7 @@ pub(super) fn locate(
         inliers,
         network_scatter,
         track_residual,
+        tracks_disagree,
     })
 }
 
@@ -458,6 +462,26 @@ mod tests {
         for road in [road(4, elsewhere, false), road(8, elsewhere, true)] {
             let found = locate_with(&prep, &road).unwrap();
             assert!(!found.lines.from_tracks);
+        }
+    }
+
+    #[test]
+    fn straight_tracks_that_meet_nowhere_say_so() {
+        // Eight track lines, each aimed at its own point of the horizon (cars on a curve, each
+        // with its own heading): no five meet within a degree.
+        let prep = vehicles(40, |_| 0.0);
+        let mut scattered = road(8, VP1, false);
+        let offsets = [0.0, 300.0, -200.0, 500.0, -400.0, 150.0, -350.0, 250.0];
+        for (t, dx) in scattered.straight.iter_mut().zip(offsets) {
+            let d = VP1 + Point2::new(dx, 0.0) - t.point;
+            t.dir = d / d.norm();
+        }
+        let found = locate_with(&prep, &scattered).unwrap();
+        assert!(found.tracks_disagree);
+        assert!(!found.lines.from_tracks);
+        // Tracks that meet, or too few to tell: no disagreement.
+        for road in [road(8, VP1, false), road(4, VP1, false)] {
+            assert!(!locate_with(&prep, &road).unwrap().tracks_disagree);
         }
     }
 
