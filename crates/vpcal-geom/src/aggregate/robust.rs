@@ -590,11 +590,11 @@ pub fn aggregate_with_scene(
     let boxes = box_edgelets(pairs, edgelets, &unit, opts.min_score);
     let placed = place_vp1(&input, &full, &prep, &mut road, &boxes, &mut rng)?;
     placed.record(&road, &mut evidence);
-    let horizon = place_horizon(&input, &placed, &prep, &road, &boxes, &unit, &mut rng);
+    let horizon = place_horizon(&input, &placed, &road, &boxes, &unit, &mut rng);
     horizon.record(input.width(), &mut evidence);
     let focal = fuse_focal(&input, &placed, &horizon, &road)?;
     focal.record(&mut evidence);
-    make_camera(&input, &full, &prep, horizon, focal, evidence, road)
+    make_camera(&input, &full, horizon, focal, evidence, road)
 }
 
 /// What [`aggregate_with_scene`] was given, for its stages.
@@ -759,7 +759,6 @@ struct Horizon<'a> {
 fn place_horizon<'a>(
     input: &Input,
     placed: &PlacedVp1<'a>,
-    prep: &Prepared,
     road: &RoadTracks,
     boxes: &[BoxEdgelets],
     unit: &[usize],
@@ -800,7 +799,7 @@ fn place_horizon<'a>(
             .and(placed.scene_opts)
             .map(|so| (input.scene.edgelets, so));
         let (lines, p1, n) = (&placed.located.lines, placed.located.p1, opts.bootstrap);
-        bootstrap(&model, prep, lines, p1, x, edges, scene, n, rng)
+        bootstrap(&model, model.prep, lines, p1, x, edges, scene, n, rng)
     });
     // The rays' own roll moves with the vehicles drawn and with VP1, through which their
     // horizon runs: its spread over the resamples joins its error model.
@@ -1006,7 +1005,6 @@ impl FocalCues {
 fn make_camera(
     input: &Input,
     full: &Prepared,
-    prep: &Prepared,
     horizon: Horizon,
     cues: FocalCues,
     mut evidence: Evidence,
@@ -1018,7 +1016,7 @@ fn make_camera(
         f0: focal.focal_px,
         ..horizon.model
     };
-    let vp1 = model.vp1;
+    let (vp1, prep) = (model.vp1, model.prep);
     if let (true, RollFrom::Rays(rr)) = (focal.measured, roll_from) {
         x = Vp2Model {
             fixed_ln_f: Some(focal.focal_px.ln()),
