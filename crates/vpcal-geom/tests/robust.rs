@@ -983,6 +983,32 @@ fn on_a_curved_road_each_cars_own_vp1_gives_the_horizon_and_focal_length() {
 }
 
 #[test]
+fn the_curved_fit_finds_a_level_horizon_where_the_straight_fits_roll_is_far_off() {
+    // On a curve the straight edgelet fit, whose roll centres the curved fit's grid, can be
+    // 10° off (a rendered U-bend): a grid around it alone ends at its edge and the fit is
+    // dropped or wrong; the grid around level too finds the camera.
+    let (scene, cars) = cars_on_a_curve();
+    let vehicles = curved_vehicles(&cars);
+    let opts = EdgeletFitOptions::default();
+    let level = scene.truth().horizon.angle();
+    for off in [-10.0f64, 10.0] {
+        let roll0 = level + off.to_radians();
+        let fit = fit_curved(scene.pp, 1920.0, 1080.0, &vehicles, roll0, &opts, 5)
+            .unwrap_or_else(|| panic!("no fit from a roll {off}° off"));
+        let (angle, dy, df) = curved_fit_errors(&scene, &fit);
+        assert!(
+            angle.abs() < 0.3,
+            "{off}°: horizon angle off by {angle}°: {fit:?}"
+        );
+        assert!(
+            dy.abs() < 10.0,
+            "{off}°: horizon {dy} px off at pp.x: {fit:?}"
+        );
+        assert!(df.abs() < 0.03, "{off}°: {fit:?}");
+    }
+}
+
+#[test]
 fn the_curved_fits_roll_spread_holds_what_a_turn_of_the_edges_moves() {
     // The edges across the cars turned a degree more than the model says: the fit's roll
     // moves by about what its turn probes measured per degree (`roll_turn_sd_deg` is that

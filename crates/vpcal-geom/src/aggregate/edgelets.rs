@@ -43,9 +43,14 @@ pub const STRAIGHT_FOCAL_GRID_WIDTHS: [f64; 2] = [0.25, 20.0];
 /// so the range is the physical one with a margin rather than a search for outliers.
 pub const CURVED_FOCAL_GRID_WIDTHS: [f64; 2] = [0.3, 10.0];
 
-/// A curved-road fit whose roll strays further than this from the straight fit's is dropped:
-/// the grid searches ±6°, and a fit that walks past it has found no consistent camera.
+/// A curved-road fit whose roll strays further than this from the centre of the grid its
+/// search started in is dropped: the grid searches ±[`CURVED_ROLL_GRID_DEG`] around each
+/// centre, and a fit that walks past it has found no consistent camera.
 pub const CURVED_ROLL_LIMIT_DEG: f64 = 8.0;
+
+/// The curved fit's grid spans the roll this far either side of its centres, in whole degrees
+/// ([`curved_grid_rolls`]).
+pub const CURVED_ROLL_GRID_DEG: f64 = 6.0;
 
 /// The straight fit's grid spans the roll this far either side of the rays' (in
 /// [`STRAIGHT_ROLL_GRID_CELLS`] cells each side). A fit that ends within a cell of its edge
@@ -838,6 +843,30 @@ impl CurvedFlat {
     }
 }
 
+/// The curved fit's grid of rolls (radians), each with the centre it was laid around: whole
+/// degrees within [`CURVED_ROLL_GRID_DEG`] of `roll0` (the straight fit's roll) and, where
+/// `roll0` is further than [`CURVED_ROLL_GRID_DEG`]` / 2` from level, of level too. On a curve
+/// the straight fit's roll can be far off (a rendered U-bend: 10.7°), and a grid around it
+/// alone then never reaches the true roll; a level grid alone moved real curved fits into
+/// other valleys of their cost. The union keeps both; the lower cost decides.
+fn curved_grid_rolls(roll0: f64) -> Vec<(f64, f64)> {
+    let half = CURVED_ROLL_GRID_DEG as i32;
+    let around = |c: f64| (-half..=half).map(move |j| (c + f64::from(j).to_radians(), c));
+    let mut rolls: Vec<(f64, f64)> = around(roll0).collect();
+    if line_angle_diff(roll0).abs() > (0.5 * CURVED_ROLL_GRID_DEG).to_radians() {
+        let cell = 0.5f64.to_radians();
+        let level: Vec<(f64, f64)> = around(0.0)
+            .filter(|&(r, _)| {
+                rolls
+                    .iter()
+                    .all(|&(q, _)| line_angle_diff(r - q).abs() > cell)
+            })
+            .collect();
+        rolls.extend(level);
+    }
+    rolls
+}
+
 /// A vehicle's weight in [`fit_curved`]: `1 / (1 + (se / s)^2)` for a tangent whose direction
 /// has standard error `se` and an edgelet scale `s` (both radians). Exact boxes give tangents
 /// good to a few tenths of a degree (weight near 1); the motion detector's boxes jitter, and a
@@ -862,7 +891,8 @@ fn meets_horizon(t: &Tangent, h0: Point2, n: Point2) -> Option<Point2> {
 /// The horizon and the focal length of a curved road, where every vehicle has its own
 /// heading: each vehicle's VP1 lies where its track's tangent meets the horizon, and its
 /// edgelets point at that VP1, at the VP2 orthogonal to it, or at VP3. Three parameters
-/// (ln f, roll, the horizon's height at `pp.x`), from a grid (around `roll0`, on at most
+/// (ln f, roll, the horizon's height at `pp.x`), from a grid (around `roll0` and level,
+/// `curved_grid_rolls`, on at most
 /// 2000 edgelets) refined by Nelder-Mead on up to `max_edgelets`, with a bootstrap over
 /// vehicles; each vehicle weighs by how well its tangent is known ([`tangent_weight`]). `None` with fewer than `min_vehicles` vehicles or `min_edgelets` edgelets.
 pub fn fit_curved(
@@ -888,23 +918,27 @@ pub fn fit_curved(
     let coarse_weight = weights(&coarse);
     let [lo_w, hi_w] = CURVED_FOCAL_GRID_WIDTHS;
     let (lo, hi) = ((lo_w * width).ln(), (hi_w * width).ln());
-    let grid: Vec<[f64; 3]> = (0..16)
+    let rolls = curved_grid_rolls(roll0);
+    let grid: Vec<([f64; 3], f64)> = (0..16)
         .flat_map(|i| {
             let ln_f = lo + (hi - lo) * f64::from(i) / 15.0;
-            (-6..=6).flat_map(move |j| {
-                let roll = roll0 + f64::from(j).to_radians();
+            rolls.iter().flat_map(move |&(roll, centre)| {
                 (0..40).map(move |k| {
                     let y0 = pp.y - 3.0 * height * (1.0 - f64::from(k) / 40.0);
-                    [ln_f, roll, y0]
+                    ([ln_f, roll, y0], centre)
                 })
             })
         })
         .collect();
-    let costs = par_map(&grid, |x| coarse.cost(&coarse_weight, pp, x, s, ex1, 0.0));
+    let costs = par_map(&grid, |(x, _)| {
+        coarse.cost(&coarse_weight, pp, x, s, ex1, 0.0)
+    });
     let mut best = (f64::INFINITY, [0.0; 3]);
-    for (x, c) in grid.into_iter().zip(costs) {
+    let mut centre_roll = roll0;
+    for ((x, centre), c) in grid.into_iter().zip(costs) {
         if c < best.0 {
             best = (c, x);
+            centre_roll = centre;
         }
     }
     let step0 = [0.05, 0.3f64.to_radians(), 0.01 * height];
@@ -988,7 +1022,7 @@ pub fn fit_curved(
             .to_degrees();
     // A fit that left the grid's range of focal lengths or rolls found no curve's camera.
     let inside = (lo..=hi).contains(&x[0])
-        && line_angle_diff(x[1] - roll0).abs() <= CURVED_ROLL_LIMIT_DEG.to_radians();
+        && line_angle_diff(x[1] - centre_roll).abs() <= CURVED_ROLL_LIMIT_DEG.to_radians();
     (inside && vp1.is_finite() && vp2.is_finite()).then_some(CurvedFit {
         focal_px: x[0].exp(),
         roll: x[1],
