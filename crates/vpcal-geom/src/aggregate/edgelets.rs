@@ -892,8 +892,7 @@ fn meets_horizon(t: &Tangent, h0: Point2, n: Point2) -> Option<Point2> {
 /// heading: each vehicle's VP1 lies where its track's tangent meets the horizon, and its
 /// edgelets point at that VP1, at the VP2 orthogonal to it, or at VP3. Three parameters
 /// (ln f, roll, the horizon's height at `pp.x`), from a grid (around `roll0` and level,
-/// `curved_grid_rolls`, on at most
-/// 2000 edgelets) refined by Nelder-Mead on up to `max_edgelets`, with a bootstrap over
+/// `curved_grid_rolls`, on at most 2000 edgelets) refined by Nelder-Mead on up to `max_edgelets`, with a bootstrap over
 /// vehicles; each vehicle weighs by how well its tangent is known ([`tangent_weight`]). `None` with fewer than `min_vehicles` vehicles or `min_edgelets` edgelets.
 pub fn fit_curved(
     pp: Point2,
@@ -933,14 +932,14 @@ pub fn fit_curved(
     let costs = par_map(&grid, |(x, _)| {
         coarse.cost(&coarse_weight, pp, x, s, ex1, 0.0)
     });
-    let mut best = (f64::INFINITY, [0.0; 3]);
-    let mut centre_roll = roll0;
+    // The best cell, and the centre of the roll grid it belongs to.
+    let mut best = (f64::INFINITY, [0.0; 3], roll0);
     for ((x, centre), c) in grid.into_iter().zip(costs) {
         if c < best.0 {
-            best = (c, x);
-            centre_roll = centre;
+            best = (c, x, centre);
         }
     }
+    let centre_roll = best.2;
     let step0 = [0.05, 0.3f64.to_radians(), 0.01 * height];
     let x = nelder_mead(
         |x| full.cost(&weight, pp, x, s, ex1, 0.0),
