@@ -154,6 +154,13 @@ pub struct FocalSensitivity {
     pub along: [f64; 2],
     /// Across-road distance ratio at each end.
     pub across: [f64; 2],
+    /// Camera height ratio at each end (`[1, 1]` in files written before it was recorded).
+    #[serde(default = "unit_ratios")]
+    pub height: [f64; 2],
+}
+
+fn unit_ratios() -> [f64; 2] {
+    [1.0; 2]
 }
 
 impl FocalSensitivity {
@@ -351,6 +358,11 @@ pub struct CalibrationFile {
     /// Height of the camera above the road, metres (with a scale).
     #[serde(default)]
     pub camera_height_m: Option<f64>,
+    /// 68 % interval of `camera_height_m` with an automatic scale: the scale's own interval
+    /// and the height's change over the focal length's interval (`scale_focal_sensitivity`)
+    /// together ([`height_interval`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_height_interval_m: Option<[f64; 2]>,
     /// Pixels to road points in metres, `[x, y, 1] ~ H [u, v, 1]` (with a scale): the road
     /// frame of `opencv` (origin under the camera, x along the road towards vp1, y across,
     /// z up), scaled so that `w = 1` at the principal point.
@@ -378,6 +390,30 @@ pub struct CalibrationFile {
     pub settings: serde_json::Map<String, serde_json::Value>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub demo: Option<DemoComparison>,
+}
+
+/// The 68 % interval of `file`'s camera height where its scale is automatic: on each side,
+/// the scale interval's log distance from the scale and the height's log change over the
+/// focal length's interval towards that side (`scale_focal_sensitivity.height`), in
+/// quadrature (the two are independent: the cars' sizes and the lens). `None` without an
+/// automatic scale's interval (a known distance, or no scale).
+pub fn height_interval(file: &CalibrationFile) -> Option<[f64; 2]> {
+    let h = file.camera_height_m.filter(|h| h.is_finite() && *h > 0.0)?;
+    let s = file.scale_m_per_unit.filter(|s| *s > 0.0)?;
+    let [lo, hi] = file
+        .scale_interval_m_per_unit
+        .filter(|[lo, hi]| *lo > 0.0 && hi.is_finite())?;
+    let (scale_down, scale_up) = ((s / lo).ln().max(0.0), (hi / s).ln().max(0.0));
+    let [a, b] = file.scale_focal_sensitivity.map_or([1.0; 2], |f| f.height);
+    let (focal_down, focal_up) = if a > 0.0 && b > 0.0 && a.is_finite() && b.is_finite() {
+        ((-a.min(b).ln()).max(0.0), a.max(b).ln().max(0.0))
+    } else {
+        (0.0, 0.0)
+    };
+    Some([
+        h * (-scale_down.hypot(focal_down)).exp(),
+        h * scale_up.hypot(focal_up).exp(),
+    ])
 }
 
 fn point(p: Point2) -> Option<[f64; 2]> {
@@ -410,6 +446,7 @@ impl CalibrationFile {
             scale_m_per_unit: None,
             scale_reference: None,
             camera_height_m: None,
+            camera_height_interval_m: None,
             road_homography: None,
             scale_source: None,
             scale_interval_m_per_unit: None,
@@ -471,6 +508,7 @@ impl CalibrationFile {
             image_size: self.image_size,
         });
         self.camera_height_m = self.scale_m_per_unit.map(|s| s * cal.plane_distance());
+        self.camera_height_interval_m = height_interval(self);
         self.road_homography = self.scale_m_per_unit.and_then(|s| cal.road_homography(s));
     }
 
@@ -555,7 +593,15 @@ impl CalibrationFile {
         self.set_scale(scale_m_per_unit, None)?;
         self.scale_source = Some("vehicles".to_string());
         self.scale_interval_m_per_unit = Some(interval);
+        self.camera_height_interval_m = height_interval(self);
         Ok(())
+    }
+
+    /// Record how the automatic scale's distances and camera height move over the focal
+    /// length's interval (`None`: a focal length without one); the height's interval follows.
+    pub fn set_focal_sensitivity(&mut self, sensitivity: Option<FocalSensitivity>) {
+        self.scale_focal_sensitivity = sensitivity;
+        self.camera_height_interval_m = height_interval(self);
     }
 
     /// Replace the failed plausibility checks named `check` by `failed` (their warnings too),
@@ -830,6 +876,38 @@ mod tests {
             .set_scale(0.5, None)
             .unwrap_err()
             .contains("too few vehicles"));
+    }
+
+    #[test]
+    fn an_automatic_scale_gives_the_height_an_interval_and_a_known_distance_drops_it() {
+        let cal = camera();
+        let mut file = CalibrationFile::calibrated(input(), &cal);
+        // The cars' sizes alone: the height's interval is the scale's, ends for ends.
+        file.set_vehicle_scale(0.5, [0.4, 0.6]).unwrap();
+        let h = file.camera_height_m.unwrap();
+        let [lo, hi] = file.camera_height_interval_m.unwrap();
+        assert!((lo - 0.8 * h).abs() < 1e-9 && (hi - 1.2 * h).abs() < 1e-9);
+        // A lens that puts the camera 1.5 times as high at one end of the focal interval and
+        // 0.9 times at the other widens each side by its own move, in quadrature.
+        file.set_focal_sensitivity(Some(FocalSensitivity {
+            focal_px: [500.0, 2000.0],
+            along: [1.0; 2],
+            across: [1.0; 2],
+            height: [1.5, 0.9],
+        }));
+        let [lo2, hi2] = file.camera_height_interval_m.unwrap();
+        let down = 1.25f64.ln().hypot(0.9f64.ln());
+        let up = 1.2f64.ln().hypot(1.5f64.ln());
+        assert!((lo2 - h * (-down).exp()).abs() < 1e-9, "{lo2}");
+        assert!((hi2 - h * up.exp()).abs() < 1e-9, "{hi2}");
+        assert!(lo2 < lo && hi2 > hi);
+        let text = file.to_json_string();
+        let back = CalibrationFile::from_json_str(&text, Path::new("c.json")).unwrap();
+        assert_eq!(back.camera_height_interval_m, file.camera_height_interval_m);
+        // A taped distance fixes the scale: no automatic interval is left to report.
+        file.set_scale(0.5, None).unwrap();
+        assert_eq!(file.camera_height_interval_m, None);
+        assert!(!file.to_json_string().contains("camera_height_interval_m"));
     }
 
     #[test]

@@ -94,6 +94,17 @@ fn principal_point(d: &Bound<'_, PyDict>) -> PyResult<Option<PrincipalPoint>> {
     parsed(d, "pp")
 }
 
+/// The marking standard: a `(period, lane width)` pair in metres or a standard's key (`"us"`).
+fn marking_standard(d: &Bound<'_, PyDict>) -> PyResult<Option<vpcal::markings::MarkingStandard>> {
+    if let Ok(Some((period, lane))) = opt::<(f64, f64)>(d, "markings", "") {
+        return format!("{period},{lane}")
+            .parse()
+            .map(Some)
+            .map_err(|e: String| PyValueError::new_err(format!("markings: {e}")));
+    }
+    parsed(d, "markings")
+}
+
 /// The pipeline configuration of the settings in `d` (the CLI's flags by their Python
 /// names); absent settings keep the library's defaults, which are the CLI's.
 fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
@@ -144,14 +155,7 @@ fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
     }
     c.focal_px = opt(d, "focal", "a number of pixels")?;
     c.focal_range_px = opt(d, "focal_range", "(short, long) focal lengths in pixels")?;
-    if let Some([period, lane]) = opt::<[f64; 2]>(d, "markings", "(period, lane width) in metres")?
-    {
-        c.markings = Some(
-            format!("{period},{lane}")
-                .parse()
-                .map_err(|e: String| PyValueError::new_err(format!("markings: {e}")))?,
-        );
-    }
+    c.markings = marking_standard(d)?;
     c.validate().map_err(err)?;
     Ok(c)
 }

@@ -43,6 +43,7 @@ def test_the_same_message_as_the_cli(tmp_path, cli):
         ({"scale_points": (1, 2, 3, 4)}, ValueError, "scale_points and scale_distance go together"),
         ({"colour": "red"}, TypeError, "unknown option 'colour'"),
         ({"markings": (9.0, 0.0)}, ValueError, "markings: expected the dash period"),
+        ({"markings": "xx"}, ValueError, r"markings: expected .* or one of the standards cz"),
         ({"max_records": 0}, vpcal.VpcalError, "--max-records must be at least 1"),
     ],
 )

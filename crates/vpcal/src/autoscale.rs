@@ -138,19 +138,23 @@ pub fn focal_sensitivity(
             .then_some((along, across))
     };
     let base = metres(cal, scale.m_per_unit)?;
+    let base_height = cal.plane_distance() * scale.m_per_unit;
     let mut along = [1.0; 2];
     let mut across = [1.0; 2];
+    let mut height = [1.0; 2];
     for (k, &f) in interval_px.iter().enumerate() {
         let c = with_focal(cal, f)?;
         let s = scale_of(size, &boxes, &c, 0)?;
         let (a, b) = metres(&c, s.m_per_unit)?;
         along[k] = a / base.0;
         across[k] = b / base.1;
+        height[k] = c.plane_distance() * s.m_per_unit / base_height;
     }
     Some(FocalSensitivity {
         focal_px: interval_px,
         along,
         across,
+        height,
     })
 }
 

@@ -128,6 +128,12 @@ impl std::str::FromStr for MarkingStandard {
     type Err = String;
 
     fn from_str(s: &str) -> Result<MarkingStandard, String> {
+        if let Some((_, _, standard)) = STANDARDS
+            .iter()
+            .find(|(key, _, _)| key.eq_ignore_ascii_case(s.trim()))
+        {
+            return Ok(*standard);
+        }
         let v: Vec<Option<f64>> = s
             .split(',')
             .map(|p| {
@@ -144,18 +150,22 @@ impl std::str::FromStr for MarkingStandard {
             }),
             _ => Err(format!(
                 "expected the dash period (line + gap) and the lane width in metres, two \
-                 positive numbers PERIOD,LANE (e.g. 9,3.5), got {s:?}"
+                 positive numbers PERIOD,LANE (e.g. 9,3.5), or one of the standards {}, got \
+                 {s:?}",
+                standard_keys()
             )),
         }
     }
 }
 
 /// Lane-line standards of motorways in several countries (national regulations' figures,
-/// rounded): a name, the dashed lane line's period (line + gap) and the lane width. A road
+/// rounded): a key (what `--markings` also takes), a name, the dashed lane line's period
+/// (line + gap) and the lane width. A road
 /// may follow none of them; the list says what the lane lines would imply under each
 /// ([`focal_by_standard`]), it does not choose.
-pub const STANDARDS: [(&str, MarkingStandard); 8] = [
+pub const STANDARDS: [(&str, &str, MarkingStandard); 8] = [
     (
+        "cz",
         "3 + 6 m, 3.5 m lanes (e.g. Czechia)",
         MarkingStandard {
             period_m: 9.0,
@@ -163,6 +173,7 @@ pub const STANDARDS: [(&str, MarkingStandard); 8] = [
         },
     ),
     (
+        "uk",
         "2 + 7 m, 3.65 m lanes (UK motorways)",
         MarkingStandard {
             period_m: 9.0,
@@ -170,6 +181,7 @@ pub const STANDARDS: [(&str, MarkingStandard); 8] = [
         },
     ),
     (
+        "nl",
         "3 + 9 m, 3.5 m lanes (e.g. Netherlands, Australia)",
         MarkingStandard {
             period_m: 12.0,
@@ -177,6 +189,7 @@ pub const STANDARDS: [(&str, MarkingStandard); 8] = [
         },
     ),
     (
+        "us",
         "10 + 30 ft, 12 ft lanes (US, MUTCD)",
         MarkingStandard {
             period_m: 12.19,
@@ -184,6 +197,7 @@ pub const STANDARDS: [(&str, MarkingStandard); 8] = [
         },
     ),
     (
+        "fr",
         "3 + 10 m, 3.5 m lanes (France)",
         MarkingStandard {
             period_m: 13.0,
@@ -191,6 +205,7 @@ pub const STANDARDS: [(&str, MarkingStandard); 8] = [
         },
     ),
     (
+        "cn",
         "6 + 9 m, 3.75 m lanes (China expressways)",
         MarkingStandard {
             period_m: 15.0,
@@ -198,6 +213,7 @@ pub const STANDARDS: [(&str, MarkingStandard); 8] = [
         },
     ),
     (
+        "de",
         "6 + 12 m, 3.75 m lanes (German motorways)",
         MarkingStandard {
             period_m: 18.0,
@@ -205,6 +221,7 @@ pub const STANDARDS: [(&str, MarkingStandard); 8] = [
         },
     ),
     (
+        "jp",
         "8 + 12 m, 3.5 m lanes (Japan expressways)",
         MarkingStandard {
             period_m: 20.0,
@@ -213,8 +230,17 @@ pub const STANDARDS: [(&str, MarkingStandard); 8] = [
     ),
 ];
 
+/// The keys of [`STANDARDS`] with what each stands for, for messages: `cz (3 + 6 m, ...), ...`.
+pub fn standard_keys() -> String {
+    STANDARDS
+        .iter()
+        .map(|(key, name, _)| format!("{key} ({name})"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The focal length the lane lines `lines` imply on camera `cal` (its VP1 and horizon held,
-/// spread `spread`, frames `width` pixels wide) under each of [`STANDARDS`]: name, period,
+/// spread `spread`, frames `width` pixels wide) under each of [`STANDARDS`]: key, name, period,
 /// lane width, and the fit's focal length, 68 % interval and misfit, or why none. Empty
 /// without a dashed line and a lane (the ratio of a length along the road to one across it
 /// is what carries `f`).
@@ -230,9 +256,10 @@ pub fn focal_by_standard(
     }
     STANDARDS
         .iter()
-        .map(|(name, std)| {
+        .map(|(key, name, std)| {
             let lengths = standard_lengths(lines, cal, std);
             let mut row = json!({
+                "key": key,
                 "standard": name,
                 "period_m": std.period_m,
                 "lane_width_m": std.lane_width_m,
@@ -942,9 +969,18 @@ mod tests {
     fn standards_are_read_with_their_errors() {
         let s: MarkingStandard = "9, 3.5".parse().unwrap_or_else(|e| panic!("{e}"));
         assert_eq!((s.period_m, s.lane_width_m), (9.0, 3.5));
-        for bad in ["9", "9,0", "a,3", "9,3.5,1", "-9,3"] {
+        for bad in ["9", "9,0", "a,3", "9,3.5,1", "-9,3", "xx"] {
             let e = bad.parse::<MarkingStandard>().unwrap_err();
-            assert!(e.contains("PERIOD,LANE"), "{e}");
+            assert!(
+                e.contains("PERIOD,LANE") && e.contains("us (10 + 30 ft"),
+                "{e}"
+            );
+        }
+        // A standard by its key, in either case: the same figures as the table's.
+        let us: MarkingStandard = "US".parse().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((us.period_m, us.lane_width_m), (12.19, 3.66));
+        for (key, _, standard) in STANDARDS {
+            assert_eq!(key.parse::<MarkingStandard>(), Ok(standard));
         }
     }
 }

@@ -309,7 +309,7 @@ pub fn set_vehicle_scale(
         .focal_interval_px
         .filter(|[lo, hi]| hi > lo)
         .and_then(|iv| crate::autoscale::focal_sensitivity(boxes, size, cal, &auto, iv));
-    file.scale_focal_sensitivity = sensitivity;
+    file.set_focal_sensitivity(sensitivity);
     let focal_part = sensitivity.map_or(String::new(), |s| {
         format!("; and as good as the focal length: {}", s.describe())
     });

@@ -215,23 +215,31 @@ pub fn check_camera(file: &CalibrationFile) -> Vec<PlausibilityCheck> {
         _ => " (check the focal length and the known distances)",
     };
     if let Some(h) = file.camera_height_m.filter(|h| h.is_finite()) {
+        let h_text = match file.camera_height_interval_m {
+            Some([a, b]) => format!("{h:.1} m (68% {a:.1}-{b:.1} m)"),
+            None => format!("{h:.1} m"),
+        };
         let [lo, hi] = CAMERA_HEIGHT_POSSIBLE_M;
         let [tlo, thi] = CAMERA_HEIGHT_TYPICAL_M;
-        if h < lo || h > hi {
+        // Impossible when even the end of the height's interval nearest the possible range
+        // is outside it (as for speeds: the calibration's own uncertainty first).
+        let [near_lo, near_hi] = file.camera_height_interval_m.unwrap_or([h, h]);
+        if near_hi < lo || near_lo > hi {
             out.push(failed(
                 CAMERA_CHECK,
                 Status::Unreliable,
                 format!(
-                    "the camera comes out {h:.1} m above the road, which no traffic camera is \
+                    "the camera comes out {h_text} above the road, which no traffic camera is \
                      ({lo:.0}-{hi:.0} m possible){scale_note}"
                 ),
             ));
         } else if h < tlo || h > thi {
+            // Atypical, or impossible only at the point and not over its interval.
             out.push(failed(
                 CAMERA_CHECK,
                 Status::Rough,
                 format!(
-                    "the camera comes out {h:.1} m above the road, outside the usual \
+                    "the camera comes out {h_text} above the road, outside the usual \
                      {tlo:.0}-{thi:.0} m of traffic cameras{scale_note}"
                 ),
             ));
@@ -355,5 +363,17 @@ mod tests {
         assert_eq!(check_camera(&f)[0].status, Status::Unreliable);
         f.camera_height_m = Some(0.3);
         assert_eq!(check_camera(&f)[0].status, Status::Unreliable);
+        // With an automatic scale's interval: impossible only where the whole interval is.
+        f.camera_height_interval_m = Some([0.2, 0.5]);
+        assert_eq!(check_camera(&f)[0].status, Status::Unreliable);
+        f.camera_height_m = Some(0.8);
+        f.camera_height_interval_m = Some([0.55, 1.3]);
+        let found = check_camera(&f);
+        assert_eq!(found[0].status, Status::Rough);
+        assert!(
+            found[0].warning.contains("0.8 m (68% 0.6-1.3 m)"),
+            "{}",
+            found[0].warning
+        );
     }
 }

@@ -1148,7 +1148,10 @@ fn scale_section(file: &CalibrationFile) -> String {
     if let Some(hm) = file.camera_height_m {
         rows.push((
             "camera height above the road",
-            format!("{} m", num(Some(hm), 1)),
+            match file.camera_height_interval_m {
+                Some([lo, hi]) => format!("{} m (68% {lo:.1}-{hi:.1} m)", num(Some(hm), 1)),
+                None => format!("{} m", num(Some(hm), 1)),
+            },
         ));
     }
     if let Some(fs) = &file.scale_focal_sensitivity {

@@ -111,7 +111,7 @@ class Options:
     focal: Optional[float] = None
     focal_range: Optional[Tuple[float, float]] = None
     max_records: Optional[int] = None
-    markings: Optional[Tuple[float, float]] = None
+    markings: Optional[Union[str, Tuple[float, float]]] = None
     scale_points: Optional[Tuple[float, float, float, float]] = None
     scale_distance: Optional[float] = None
     tracks: Optional[bool] = None
@@ -687,6 +687,13 @@ class Calibration:
     @property
     def camera_height_m(self) -> Optional[float]:
         return self._doc.get("camera_height_m")
+
+    @property
+    def camera_height_interval_m(self) -> Optional[Tuple[float, float]]:
+        """68 % interval of ``camera_height_m`` with an automatic scale (the cars' sizes and
+        the focal length's interval together); ``None`` otherwise."""
+        iv = self._doc.get("camera_height_interval_m")
+        return None if iv is None else (float(iv[0]), float(iv[1]))
 
     @property
     def tracks(self) -> Optional[List[Track]]:

@@ -206,9 +206,10 @@ pub struct PipelineArgs {
     /// (one line plus one gap: 9 for 3 + 6 m, 12.19 for the US 10 + 30 ft) and its lane width.
     /// The lane lines found in the scene's background then measure the focal length (a period
     /// along the road against a lane across it) and the metric scale, as --scale-points
-    /// lengths would (`focal_source`/`scale_source: markings`). Read the road's own standard:
-    /// a wrong one scales every distance and speed.
-    #[arg(long, value_name = "PERIOD,LANE")]
+    /// lengths would (`focal_source`/`scale_source: markings`). Or a national standard's key:
+    /// cz, uk, nl, us, fr, cn, de, jp (motorway figures; `evidence.markings.focal_by_standard`
+    /// lists them). Read the road's own standard: a wrong one scales every distance and speed.
+    #[arg(long, value_name = "PERIOD,LANE|KEY")]
     pub markings: Option<vpcal::markings::MarkingStandard>,
     /// No progress bar.
     #[arg(long)]
@@ -580,8 +581,13 @@ pub fn run(args: Args) -> Result<Exit> {
                     .scale_interval_m_per_unit
                     .map(|[lo, hi]| format!(", 68% {lo:.4}-{hi:.4}"))
                     .unwrap_or_default();
+                let height_interval = doc
+                    .camera_height_interval_m
+                    .map(|[lo, hi]| format!(" (68% {lo:.1}-{hi:.1} m)"))
+                    .unwrap_or_default();
                 eprintln!(
-                    "  {:<22} {s:.4} m per unit ({source}{interval}); camera {height:.1} m above the road",
+                    "  {:<22} {s:.4} m per unit ({source}{interval}); camera {height:.1} m above \
+                     the road{height_interval}",
                     "scale"
                 );
             }

@@ -124,10 +124,10 @@ pub struct VpoutArgs {
     /// VPout records alone.
     #[arg(long)]
     pub no_scene: bool,
-    /// The roads' marking standard, PERIOD,LANE in metres (as `calibrate --markings`): the
+    /// The roads' marking standard, PERIOD,LANE in metres or a key (as `calibrate --markings`): the
     /// lane lines of each video's `screen.png` then measure the focal length and join each
     /// calibration's own (`vpcal::road_focal::combine`).
-    #[arg(long, value_name = "PERIOD,LANE")]
+    #[arg(long, value_name = "PERIOD,LANE|KEY")]
     pub markings: Option<vpcal::markings::MarkingStandard>,
     /// The reference cameras (FILE's cameras[<video>] {vp1, vp2, pp}, the layout of
     /// camera_truth.json): each calibration's focal length is then compared with theirs, and

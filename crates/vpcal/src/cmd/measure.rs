@@ -65,9 +65,10 @@ pub struct ScaleArgs {
     #[arg(long, value_parser = super::args::positive_f64, allow_negative_numbers = true)]
     pub lane_width: Vec<f64>,
     /// The road's marking standard, PERIOD,LANE in metres (the period of its dashed lane
-    /// lines, one line plus one gap, and its lane width; see `calibrate --markings`): the
-    /// lane lines in --image become known lengths (`markings` in the sources).
-    #[arg(long, value_name = "PERIOD,LANE", requires = "image")]
+    /// lines, one line plus one gap, and its lane width; or a standard's key, e.g. us; see
+    /// `calibrate --markings`): the lane lines in --image become known lengths (`markings` in
+    /// the sources).
+    #[arg(long, value_name = "PERIOD,LANE|KEY", requires = "image")]
     pub markings: Option<vpcal::markings::MarkingStandard>,
     /// A picture of the road from the calibrated camera, its frames' size, with little
     /// traffic (a quiet frame of the clip), where --markings finds the lane lines.
