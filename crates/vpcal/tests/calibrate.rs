@@ -1001,6 +1001,21 @@ fn calibrate_writes_tracks_and_bcs_cars_that_eval_speed_measures() {
         sens["focal_px"][0].as_f64(),
         auto["focal_interval_px"][0].as_f64()
     );
+    // The camera's height: its interval holds it and is at least as wide, relatively, as the
+    // scale's own (the focal length's move adds to it), and the run prints it.
+    let h = auto["camera_height_m"].as_f64().unwrap();
+    let [hlo, hhi] = [0, 1].map(|i| auto["camera_height_interval_m"][i].as_f64().unwrap());
+    assert!(hlo < h && h < hhi, "{hlo}-{h}-{hhi}");
+    assert!(hhi / hlo >= hi / lo - 1e-9, "{hlo}-{hhi} vs {lo}-{hi}");
+    assert!(
+        ratio("height", 0) > 0.0 && ratio("height", 1) > 0.0,
+        "{sens}"
+    );
+    assert!(
+        text(&r).contains(&format!("(68% {hlo:.1}-{hhi:.1} m)")),
+        "{}",
+        text(&r)
+    );
     assert!(
         text(&r).contains("distances along the road"),
         "{}",
