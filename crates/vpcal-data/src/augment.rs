@@ -50,6 +50,20 @@ pub struct AugmentConfig {
     /// resolution, noise, JPEG; [`crate::sensor`]); 0 (the paper) applies none.
     #[serde(default)]
     pub sensor_probability: f64,
+    /// Largest factor of the sensor effects' down-sampling (drawn uniformly from 1.5 to it).
+    #[serde(default = "default_max_downsample")]
+    pub max_downsample: f64,
+}
+
+/// The sensor effects' largest down-sampling in the `real` preset: the corpus's webcams.
+pub const REAL_MAX_DOWNSAMPLE: f64 = 3.5;
+
+/// The largest down-sampling of the `real-small` preset: a vehicle 16 px tall, its crop
+/// upsampled to the network's 128 px, has about an eighth of the crop's resolution.
+pub const SMALL_MAX_DOWNSAMPLE: f64 = 8.0;
+
+fn default_max_downsample() -> f64 {
+    REAL_MAX_DOWNSAMPLE
 }
 
 impl AugmentConfig {
@@ -64,6 +78,7 @@ impl AugmentConfig {
             min_crop_px: 12.5,
             max_tries: 4,
             sensor_probability: 0.0,
+            max_downsample: REAL_MAX_DOWNSAMPLE,
         }
     }
 
@@ -73,6 +88,15 @@ impl AugmentConfig {
         AugmentConfig {
             sensor_probability: 0.3,
             ..AugmentConfig::paper()
+        }
+    }
+
+    /// As [`AugmentConfig::real`], with the down-sampling reaching [`SMALL_MAX_DOWNSAMPLE`]:
+    /// crops as blurred as those of the small vehicles that far traffic cameras see most.
+    pub fn real_small() -> AugmentConfig {
+        AugmentConfig {
+            max_downsample: SMALL_MAX_DOWNSAMPLE,
+            ..AugmentConfig::real()
         }
     }
 
@@ -97,12 +121,14 @@ impl AugmentConfig {
         }
     }
 
-    /// A preset by name: `paper`, `reference`, `real` (the paper's plus sensor effects) or
-    /// `none` (= [`AugmentConfig::evaluation`] at 128 px).
+    /// A preset by name: `paper`, `reference`, `real` (the paper's plus sensor effects),
+    /// `real-small` (those with stronger down-sampling) or `none` (=
+    /// [`AugmentConfig::evaluation`] at 128 px).
     pub fn preset(name: &str) -> Option<AugmentConfig> {
         match name {
             "paper" => Some(AugmentConfig::paper()),
             "real" => Some(AugmentConfig::real()),
+            "real-small" => Some(AugmentConfig::real_small()),
             "reference" => Some(AugmentConfig::reference()),
             "none" => Some(AugmentConfig::evaluation(128)),
             _ => None,
@@ -110,7 +136,7 @@ impl AugmentConfig {
     }
 
     /// Names accepted by [`AugmentConfig::preset`].
-    pub const PRESETS: [&'static str; 4] = ["paper", "reference", "real", "none"];
+    pub const PRESETS: [&'static str; 5] = ["paper", "reference", "real", "real-small", "none"];
 
     /// Check that every value is usable.
     ///
@@ -142,6 +168,12 @@ impl AugmentConfig {
             return Err(format!(
                 "augmentation sensor_probability must be in [0, 1], got {}",
                 self.sensor_probability
+            ));
+        }
+        if !(self.max_downsample.is_finite() && self.max_downsample > 1.5) {
+            return Err(format!(
+                "augmentation max_downsample must be finite and > 1.5, got {}",
+                self.max_downsample
             ));
         }
         Ok(())
@@ -368,7 +400,8 @@ pub fn augment<R: Rng + ?Sized>(
     let image = warp::render(&sample.image, size, cfg.filter, |q| {
         inverse.apply(Point2::new(crop.x0 + q.x * sx, crop.y0 + q.y * sy))
     });
-    let image = crate::sensor::sensor_effects(image, cfg.sensor_probability, rng);
+    let image =
+        crate::sensor::sensor_effects(image, cfg.sensor_probability, cfg.max_downsample, rng);
     let to_out = |p: Point2| [(p.x - crop.x0) / sx, (p.y - crop.y0) / sy];
     let bb3d = draw.bb3d.map(to_out);
     let tight = hull(&draw.bb3d);

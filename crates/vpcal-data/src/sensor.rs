@@ -11,15 +11,20 @@
 //! The ranges cover what the real corpus shows (`../shared/data/traffic_corpus`: 320x240
 //! webcams with heavy compression, hazy motorway webcams, night scenes, telephoto blur):
 //! gain 0.55-1.45, offset ±30, per-channel gain ±12 %, saturation 0.3-1.2, blur σ 0.3-1.6 px,
-//! down-sampling by 1.5-3.5, noise σ 2-10 (8-bit levels), JPEG quality 15-70; occluders cover
+//! down-sampling by 1.5-3.5 (1.5-8 in the `real-small` preset, for far vehicles), noise σ 2-10 (8-bit levels), JPEG quality 15-70; occluders cover
 //! 8-30 % of the crop's width or height.
 
 use image::{ImageBuffer, Rgb, RgbImage};
 use rand::Rng;
 
 /// Apply each sensor effect with probability `p` (0 returns the image unchanged and draws
-/// nothing from `rng`).
-pub fn sensor_effects<R: Rng + ?Sized>(image: RgbImage, p: f64, rng: &mut R) -> RgbImage {
+/// nothing from `rng`), the down-sampling by a factor from 1.5 to `max_downsample`.
+pub fn sensor_effects<R: Rng + ?Sized>(
+    image: RgbImage,
+    p: f64,
+    max_downsample: f64,
+    rng: &mut R,
+) -> RgbImage {
     if p <= 0.0 {
         return image;
     }
@@ -35,7 +40,7 @@ pub fn sensor_effects<R: Rng + ?Sized>(image: RgbImage, p: f64, rng: &mut R) -> 
         img = image::imageops::blur(&img, sigma);
     }
     if rng.random::<f64>() < p {
-        img = low_resolution(&img, rng.random_range(1.5..3.5));
+        img = low_resolution(&img, rng.random_range(1.5..max_downsample));
     }
     if rng.random::<f64>() < p {
         let sigma = rng.random_range(2.0..10.0);
@@ -150,7 +155,7 @@ mod tests {
     fn probability_zero_changes_nothing_and_draws_nothing() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
         let img = gradient();
-        assert_eq!(sensor_effects(img.clone(), 0.0, &mut rng), img);
+        assert_eq!(sensor_effects(img.clone(), 0.0, 3.5, &mut rng), img);
         let mut fresh = rand_chacha::ChaCha8Rng::seed_from_u64(1);
         assert_eq!(rng.random::<u64>(), fresh.random::<u64>());
     }
@@ -160,7 +165,7 @@ mod tests {
         let img = gradient();
         for seed in 0..8 {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-            let out = sensor_effects(img.clone(), 1.0, &mut rng);
+            let out = sensor_effects(img.clone(), 1.0, 3.5, &mut rng);
             assert_eq!(out.dimensions(), img.dimensions());
             assert_ne!(out, img, "seed {seed}");
         }

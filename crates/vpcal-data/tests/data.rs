@@ -424,6 +424,45 @@ fn sensor_effects_change_pixels_not_geometry() {
         ..AugmentConfig::paper()
     };
     assert!(bad.validate().unwrap_err().contains("sensor_probability"));
+    // The far-vehicle preset: the same geometry, blurrier pictures where it down-samples.
+    let small = AugmentConfig::preset("real-small").unwrap();
+    assert!(small.validate().is_ok() && small.max_downsample > real.max_downsample);
+    let (mut differ, mut softer) = (0, 0);
+    for seed in 0..12u64 {
+        let a = augment(&sample, &real, &mut sample_rng(seed, 0, 0)).unwrap();
+        let b = augment(&sample, &small, &mut sample_rng(seed, 0, 0)).unwrap();
+        assert_eq!(
+            (a.crop, a.vp1_box, a.vp2_box),
+            (b.crop, b.vp1_box, b.vp2_box)
+        );
+        if a.image != b.image {
+            differ += 1;
+            softer += usize::from(detail(&b.image) < detail(&a.image));
+        }
+    }
+    assert!(
+        differ >= 1 && softer == differ,
+        "{softer} of {differ} softer"
+    );
+    let bad = AugmentConfig {
+        max_downsample: 1.0,
+        ..AugmentConfig::real()
+    };
+    assert!(bad.validate().unwrap_err().contains("max_downsample"));
+}
+
+/// Sum of absolute differences between horizontal neighbours: how much fine detail a
+/// picture has.
+fn detail(img: &image::RgbImage) -> u64 {
+    let (w, h) = img.dimensions();
+    let mut sum = 0u64;
+    for y in 0..h {
+        for x in 1..w {
+            let (a, b) = (img.get_pixel(x - 1, y), img.get_pixel(x, y));
+            sum += (0..3).map(|c| u64::from(a[c].abs_diff(b[c]))).sum::<u64>();
+        }
+    }
+    sum
 }
 
 /// A copy of the fixture in a temporary directory.
