@@ -10,7 +10,8 @@ size (unoccluded, untruncated, at least 20 px tall), the median direction errors
 network's VP1 and VP2 and of the edgelets' VP2 at each factor with the median larger box
 side. The same vehicles at every size: what changes is only how many pixels they cover.
 
-Usage: scripts/kitti_downscale.py VPCAL OUT K [K ...]     (e.g. 1 0.5 0.35 0.25)
+Usage: scripts/kitti_downscale.py [--model WEIGHTS] VPCAL OUT K [K ...]   (e.g. 1 0.5 0.35 0.25)
+(without --model: the model built into VPCAL)
 """
 import json
 import os
@@ -53,16 +54,20 @@ def median(values):
 
 
 def main():
-    if len(sys.argv) < 4:
+    args = sys.argv[1:]
+    model = []
+    if args[:1] == ["--model"] and len(args) > 1:
+        model, args = ["--model", args[1]], args[2:]
+    if len(args) < 3:
         sys.exit(__doc__)
-    vpcal, out, factors = sys.argv[1], sys.argv[2], [float(k) for k in sys.argv[3:]]
+    vpcal, out, factors = args[0], args[1], [float(k) for k in args[2:]]
     src = os.path.join(data_dir(), "real", "kitti_object")
     records = {}
     for k in factors:
         dst = os.path.join(out, f"k{k}")
         downscaled(src, dst, k)
         veh = os.path.join(dst, "vehicles.json")
-        r = subprocess.run([vpcal, "eval", "kitti", "--data", dst, "--all", "--vehicles", veh],
+        r = subprocess.run([vpcal, "eval", "kitti", "--data", dst, "--all", "--vehicles", veh] + model,
                            capture_output=True, text=True)
         if r.returncode:
             sys.exit(f"vpcal eval kitti failed at K={k}: {r.stderr.strip()}")
