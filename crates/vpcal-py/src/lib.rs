@@ -83,26 +83,20 @@ where
         .map_err(|e| PyValueError::new_err(format!("{key}: {e}")))
 }
 
-/// The principal point: `"centre"`, `"bcs"` or an `(x, y)` pair.
-fn principal_point(d: &Bound<'_, PyDict>) -> PyResult<Option<PrincipalPoint>> {
-    if let Ok(Some((x, y))) = opt::<(f64, f64)>(d, "pp", "") {
-        return format!("{x},{y}")
+/// A setting given as a pair of numbers or as text, parsed by the library's parser as the
+/// CLI's `A,B` or word: the principal point (`"centre"`, `"bcs"` or `(x, y)`), the marking
+/// standard (`(period, lane width)` in metres or a standard's key, `"us"`).
+fn pair_or_text<T: std::str::FromStr>(d: &Bound<'_, PyDict>, key: &str) -> PyResult<Option<T>>
+where
+    T::Err: std::fmt::Display,
+{
+    if let Ok(Some((a, b))) = opt::<(f64, f64)>(d, key, "") {
+        return format!("{a},{b}")
             .parse()
             .map(Some)
-            .map_err(|e: String| PyValueError::new_err(format!("pp: {e}")));
+            .map_err(|e| PyValueError::new_err(format!("{key}: {e}")));
     }
-    parsed(d, "pp")
-}
-
-/// The marking standard: a `(period, lane width)` pair in metres or a standard's key (`"us"`).
-fn marking_standard(d: &Bound<'_, PyDict>) -> PyResult<Option<vpcal::markings::MarkingStandard>> {
-    if let Ok(Some((period, lane))) = opt::<(f64, f64)>(d, "markings", "") {
-        return format!("{period},{lane}")
-            .parse()
-            .map(Some)
-            .map_err(|e: String| PyValueError::new_err(format!("markings: {e}")));
-    }
-    parsed(d, "markings")
+    parsed(d, key)
 }
 
 /// The pipeline configuration of the settings in `d` (the CLI's flags by their Python
@@ -150,12 +144,12 @@ fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
     if let Some(v) = opt(d, "bootstrap", "an int")? {
         c.bootstrap = v;
     }
-    if let Some(v) = principal_point(d)? {
+    if let Some(v) = pair_or_text::<PrincipalPoint>(d, "pp")? {
         c.pp = v;
     }
     c.focal_px = opt(d, "focal", "a number of pixels")?;
     c.focal_range_px = opt(d, "focal_range", "(short, long) focal lengths in pixels")?;
-    c.markings = marking_standard(d)?;
+    c.markings = pair_or_text(d, "markings")?;
     c.validate().map_err(err)?;
     Ok(c)
 }
@@ -481,7 +475,7 @@ fn record_settings(d: &Bound<'_, PyDict>) -> PyResult<RecordSettings> {
     if let Some(v) = parsed(d, "method")? {
         s.method = v;
     }
-    if let Some(v) = principal_point(d)? {
+    if let Some(v) = pair_or_text::<PrincipalPoint>(d, "pp")? {
         s.pp = v;
     }
     s.image_size = opt(d, "image_size", "(width, height) in pixels")?;
