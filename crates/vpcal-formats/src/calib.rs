@@ -597,6 +597,16 @@ impl CalibrationFile {
         Ok(())
     }
 
+    /// The camera height in words, `8.3 m`, with its interval where known:
+    /// `8.3 m (68% 7.7-9.1 m)`; `None` without a (finite) height.
+    pub fn height_text(&self) -> Option<String> {
+        let h = self.camera_height_m.filter(|h| h.is_finite())?;
+        Some(match self.camera_height_interval_m {
+            Some([lo, hi]) => format!("{h:.1} m (68% {lo:.1}-{hi:.1} m)"),
+            None => format!("{h:.1} m"),
+        })
+    }
+
     /// Record how the automatic scale's distances and camera height move over the focal
     /// length's interval (`None`: a focal length without one); the height's interval follows.
     pub fn set_focal_sensitivity(&mut self, sensitivity: Option<FocalSensitivity>) {
@@ -896,6 +906,10 @@ mod tests {
             height: [1.5, 0.9],
         }));
         let [lo2, hi2] = file.camera_height_interval_m.unwrap();
+        assert_eq!(
+            file.height_text(),
+            Some(format!("{h:.1} m (68% {lo2:.1}-{hi2:.1} m)"))
+        );
         let down = 1.25f64.ln().hypot(0.9f64.ln());
         let up = 1.2f64.ln().hypot(1.5f64.ln());
         assert!((lo2 - h * (-down).exp()).abs() < 1e-9, "{lo2}");

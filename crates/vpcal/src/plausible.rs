@@ -214,11 +214,7 @@ pub fn check_camera(file: &CalibrationFile) -> Vec<PlausibilityCheck> {
         }
         _ => " (check the focal length and the known distances)",
     };
-    if let Some(h) = file.camera_height_m.filter(|h| h.is_finite()) {
-        let h_text = match file.camera_height_interval_m {
-            Some([a, b]) => format!("{h:.1} m (68% {a:.1}-{b:.1} m)"),
-            None => format!("{h:.1} m"),
-        };
+    if let (Some(h), Some(h_text)) = (file.camera_height_m, file.height_text()) {
         let [lo, hi] = CAMERA_HEIGHT_POSSIBLE_M;
         let [tlo, thi] = CAMERA_HEIGHT_TYPICAL_M;
         // Impossible when even the end of the height's interval nearest the possible range

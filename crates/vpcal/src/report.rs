@@ -1145,14 +1145,11 @@ fn scale_section(file: &CalibrationFile) -> String {
             format!("{a:.5}-{b:.5} m per unit (±{:.0} %)", 50.0 * (b / a - 1.0)),
         ));
     }
-    if let Some(hm) = file.camera_height_m {
-        rows.push((
-            "camera height above the road",
-            match file.camera_height_interval_m {
-                Some([lo, hi]) => format!("{} m (68% {lo:.1}-{hi:.1} m)", num(Some(hm), 1)),
-                None => format!("{} m", num(Some(hm), 1)),
-            },
-        ));
+    if file.camera_height_m.is_some() {
+        let text = file
+            .height_text()
+            .unwrap_or_else(|| format!("{} m", num(None, 1)));
+        rows.push(("camera height above the road", text));
     }
     if let Some(fs) = &file.scale_focal_sensitivity {
         rows.push(("with the focal length's interval", fs.describe()));

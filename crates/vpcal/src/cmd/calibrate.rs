@@ -576,18 +576,14 @@ pub fn run(args: Args) -> Result<Exit> {
                 );
             }
             if let (Some(s), Some(source)) = (scale, doc.scale_source.as_deref()) {
-                let height = doc.camera_height_m.unwrap_or(f64::NAN);
+                let height = doc.height_text().unwrap_or_else(|| "NaN m".to_string());
                 let interval = doc
                     .scale_interval_m_per_unit
                     .map(|[lo, hi]| format!(", 68% {lo:.4}-{hi:.4}"))
                     .unwrap_or_default();
-                let height_interval = doc
-                    .camera_height_interval_m
-                    .map(|[lo, hi]| format!(" (68% {lo:.1}-{hi:.1} m)"))
-                    .unwrap_or_default();
                 eprintln!(
-                    "  {:<22} {s:.4} m per unit ({source}{interval}); camera {height:.1} m above \
-                     the road{height_interval}",
+                    "  {:<22} {s:.4} m per unit ({source}{interval}); camera {height} above the \
+                     road",
                     "scale"
                 );
             }
