@@ -195,7 +195,7 @@ fn kitti_cars_give_the_metric_scale() {
 }
 
 #[test]
-fn synth_crops_take_the_camera_heights_and_pitches_they_are_given() {
+fn synth_crops_take_the_camera_heights_pitches_and_sizes_they_are_given() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("low");
     let o = vpcal(&[
@@ -209,6 +209,8 @@ fn synth_crops_take_the_camera_heights_and_pitches_they_are_given() {
         "1.2,3",
         "--pitch",
         "0.5,10",
+        "--box-px",
+        "12,40",
         "-o",
         out.to_str().unwrap(),
     ]);
@@ -221,6 +223,18 @@ fn synth_crops_take_the_camera_heights_and_pitches_they_are_given() {
         let p = r["meta"]["pitch_deg"].as_f64().unwrap();
         assert!((1.2..=3.0).contains(&h), "{line}");
         assert!((0.5..=10.0).contains(&p), "{line}");
+        // The 3D box's larger side in the crop's pixels (the frame's scale); the range holds
+        // where the vehicle is placed, before the lane-keeping jitter (up to ~15 %).
+        let corners = r["bb3d"].as_array().unwrap();
+        let (xs, ys): (Vec<f64>, Vec<f64>) = corners
+            .iter()
+            .map(|c| (c[0].as_f64().unwrap(), c[1].as_f64().unwrap()))
+            .unzip();
+        let span = |v: &[f64]| {
+            v.iter().copied().fold(f64::MIN, f64::max) - v.iter().copied().fold(f64::MAX, f64::min)
+        };
+        let size = span(&xs).max(span(&ys));
+        assert!((10.0..=48.0).contains(&size), "box {size} px: {line}");
         n += 1;
     }
     assert_eq!(n, 6);

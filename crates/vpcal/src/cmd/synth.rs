@@ -49,6 +49,11 @@ pub struct BgArgs {
     /// Camera pitch below the horizon, degrees (default 8,60; e.g. 0,12 at street level).
     #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
     pub pitch: Option<Vec<f64>>,
+    /// Size of the vehicle in the frame: its projected 3D box's larger side, pixels (default
+    /// 50,300; e.g. 12,50 for far vehicles, which the network sees up-sampled). The range holds
+    /// where each vehicle is placed; its lane-keeping jitter moves the size by up to ~15 %.
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub box_px: Option<Vec<f64>>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -243,6 +248,7 @@ fn generator(seed: u64, bg: &BgArgs) -> Result<CropGenerator> {
         artefacts: !bg.clean,
         height_m: pair("--camera-height", &bg.camera_height, defaults.height_m)?,
         pitch_deg: pair("--pitch", &bg.pitch, defaults.pitch_deg)?,
+        box_px: pair("--box-px", &bg.box_px, defaults.box_px)?,
         ..defaults
     };
     Ok(CropGenerator::new(cfg, seed, Arc::new(backgrounds))?)
