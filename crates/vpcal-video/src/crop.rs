@@ -79,6 +79,23 @@ pub fn integer_box(b: &BoxPx, width: u32, height: u32) -> Option<IntBox> {
     (ib.x1 > ib.x0 && ib.y1 > ib.y0).then_some(ib)
 }
 
+/// The box the network's crop is cut at for the detection `b`: `b` itself where its larger
+/// side is at least `min_side` pixels (or `min_side` is 0), else `b` scaled about its centre
+/// until that side is `min_side`, so a small vehicle's crop also holds the road around it,
+/// whose lane lines and neighbours point at VP1 as the vehicle's few pixels cannot
+/// (models/default/MODEL.md, "Context does fix it"). The VPs are decoded in this box's frame;
+/// [`integer_box`] clamps it to the picture when it is cut.
+pub fn context_box(b: &BoxPx, min_side: f64) -> BoxPx {
+    let side = (b.x1 - b.x0).max(b.y1 - b.y0);
+    if !(side > 0.0 && side.is_finite() && min_side > side) {
+        return *b;
+    }
+    let s = min_side / side;
+    let c = b.center();
+    let (hw, hh) = (0.5 * (b.x1 - b.x0) * s, 0.5 * (b.y1 - b.y0) * s);
+    BoxPx::new(c.x - hw, c.y - hh, c.x + hw, c.y + hh)
+}
+
 /// Resampling filter for crops (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum CropFilter {
@@ -314,6 +331,26 @@ impl CropBatch {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn small_boxes_get_context_about_their_centre_and_large_ones_are_cut_as_they_are() {
+        let small = BoxPx::new(100.0, 50.0, 120.0, 60.0); // 20 x 10
+        let c = context_box(&small, 64.0);
+        assert!((c.center().x - 110.0).abs() < 1e-9 && (c.center().y - 55.0).abs() < 1e-9);
+        assert!((c.x1 - c.x0 - 64.0).abs() < 1e-9, "{c:?}");
+        assert!(
+            (c.y1 - c.y0 - 32.0).abs() < 1e-9,
+            "the aspect is kept: {c:?}"
+        );
+        let tall = BoxPx::new(0.0, 0.0, 10.0, 40.0);
+        let t = context_box(&tall, 64.0);
+        assert!((t.y1 - t.y0 - 64.0).abs() < 1e-9 && (t.x1 - t.x0 - 16.0).abs() < 1e-9);
+        let large = BoxPx::new(0.0, 0.0, 100.0, 30.0);
+        assert_eq!(context_box(&large, 64.0), large);
+        assert_eq!(context_box(&small, 0.0), small);
+        let empty = BoxPx::new(5.0, 5.0, 5.0, 5.0);
+        assert_eq!(context_box(&empty, 64.0), empty);
+    }
 
     #[test]
     fn integer_box_follows_the_reference() {

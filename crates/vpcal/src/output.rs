@@ -73,6 +73,7 @@ pub fn settings(out: &PipelineOutput, c: &PipelineConfig) -> Map<String, Value> 
         "max_per_frame": c.max_per_frame,
         "method": c.method.name(),
         "flip_average": c.flip_average,
+        "min_crop_px": c.min_crop_px,
         "edgelets": c.edgelets,
         "replay": c.replay,
         "bootstrap": c.bootstrap,

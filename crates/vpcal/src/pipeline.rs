@@ -24,7 +24,7 @@ use vpcal_geom::heatmap::VpPrediction;
 use vpcal_geom::{BoxPx, Point2};
 use vpcal_net::VpNet;
 use vpcal_video::background::{scene_edgelet_options, scene_edgelets, BackgroundSampler};
-use vpcal_video::crop::{integer_box, CropFilter, CropResizer};
+use vpcal_video::crop::{context_box, integer_box, CropFilter, CropResizer};
 use vpcal_video::detect::Detection;
 use vpcal_video::edgelets::{edgelets_in_box, EdgeletOptions};
 use vpcal_video::filter::{DropReason, FilterConfig, FrameFilter};
@@ -173,6 +173,9 @@ pub struct PipelineConfig {
     pub batch: usize,
     /// Average every crop's heatmaps with its mirror image's.
     pub flip_average: bool,
+    /// Boxes whose larger side is under this many pixels are cut for the network with the
+    /// road around them ([`context_box`]); 0: every crop is cut at its box.
+    pub min_crop_px: f64,
     /// Look for edgelets inside the boxes (VP2 evidence for the roll and focal length).
     pub edgelets: bool,
     /// Look again at the frames the motion detector spent learning its background.
@@ -213,6 +216,7 @@ impl Default for PipelineConfig {
             device: "cpu".to_string(),
             batch: 32,
             flip_average: false,
+            min_crop_px: 0.0,
             edgelets: true,
             replay: true,
             frames: SourceOptions::default(),
@@ -246,6 +250,12 @@ impl PipelineConfig {
         }
         if !self.min_score.is_finite() {
             bail!("--min-score must be a number");
+        }
+        if !(self.min_crop_px.is_finite() && self.min_crop_px >= 0.0) {
+            bail!(
+                "--min-crop-px {}: expected a number of pixels, 0 or more",
+                self.min_crop_px
+            );
         }
         if let Some(f) = self.focal_px {
             if !(f.is_finite() && f > 0.0) {
@@ -611,7 +621,10 @@ fn near_vps(
 
 /// A crop waiting for its batch: frame, score, crop box, detector box, edgelets in the box,
 /// and the followed vehicle it belongs to.
-type Pending = (u64, f32, BoxPx, BoxPx, Vec<Edgelet>, Option<u64>);
+/// A crop on its way to the network: frame, score, the record's box (the detection's
+/// integer box), the detector's box, edgelets, vehicle, and the box the crop was cut at
+/// (the VPs' frame; larger than the record's box for small boxes with `min_crop_px`).
+type Pending = (u64, f32, BoxPx, BoxPx, Vec<Edgelet>, Option<u64>, BoxPx);
 
 /// A box the network does not see, waiting for its vehicle's first network VPs (its
 /// edgelets not yet gated by them).
@@ -784,11 +797,17 @@ impl<'a> Stages<'a> {
         }
         let sent_boxes: Vec<BoxPx> = sent.iter().map(|&i| boxes[i]).collect();
         let t = Instant::now();
-        let batch = self.resizer.crop_batch(&frame.image, &sent_boxes)?;
+        let cut_boxes: Vec<BoxPx> = sent_boxes
+            .iter()
+            .map(|b| context_box(b, self.config.min_crop_px))
+            .collect();
+        let batch = self.resizer.crop_batch(&frame.image, &cut_boxes)?;
         self.stats.stages.crop += t.elapsed().as_secs_f64();
         let len = self.crop_len;
-        for (k, (&src, &bp)) in batch.source.iter().zip(&batch.boxes).enumerate() {
-            let src = sent[src];
+        for (k, (&cut, &cut_box)) in batch.source.iter().zip(&batch.boxes).enumerate() {
+            let src = sent[cut];
+            // The record keeps the detection's own integer box (sizes, tracks, edgelets).
+            let bp = integer_box(&sent_boxes[cut], w, h).map_or(cut_box, |ib| ib.to_box_px());
             self.pending
                 .extend_from_slice(&batch.images[k * len..(k + 1) * len]);
             let edgelets = self.box_edgelets(&frame.image, &bp);
@@ -800,6 +819,7 @@ impl<'a> Stages<'a> {
                 kept.bbox,
                 edgelets,
                 plan[src].1,
+                cut_box,
             ));
             self.stats.crops += 1;
             if self.pending_meta.len() >= self.config.batch {
@@ -817,10 +837,12 @@ impl<'a> Stages<'a> {
         let t = Instant::now();
         let preds = self.net.predict_prepared(&self.pending)?;
         let mut meta = std::mem::take(&mut self.pending_meta);
-        for ((frame, score, crop_box, det_box, edgelets, vehicle), p) in meta.drain(..).zip(preds) {
+        for ((frame, score, crop_box, det_box, edgelets, vehicle, cut_box), p) in
+            meta.drain(..).zip(preds)
+        {
             let prediction = p.vp;
-            let vp1 = crop_box.frame_from_box(prediction.vp1);
-            let vp2 = crop_box.frame_from_box(prediction.vp2);
+            let vp1 = cut_box.frame_from_box(prediction.vp1);
+            let vp2 = cut_box.frame_from_box(prediction.vp2);
             if let Some(id) = vehicle {
                 self.vehicle_vps.insert(id, (vp1, vp2));
             }

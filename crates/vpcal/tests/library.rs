@@ -104,6 +104,46 @@ fn the_pipeline_calibrates_a_synthetic_clip_in_process() {
     };
     let e = run_pipeline(&dataset.join("video.mp4"), &bad, &Silent).unwrap_err();
     assert!(format!("{e:#}").contains("--batch"), "{e:#}");
+    let bad = PipelineConfig {
+        min_crop_px: -1.0,
+        ..config.clone()
+    };
+    let e = run_pipeline(&dataset.join("video.mp4"), &bad, &Silent).unwrap_err();
+    assert!(format!("{e:#}").contains("--min-crop-px"), "{e:#}");
+
+    // Cut with the road around every box: the same records and boxes (sizes, tracks and
+    // edgelets use the detection's box), VPs decoded in the larger crops' frames.
+    let wide_config = PipelineConfig {
+        min_crop_px: 200.0,
+        ..config.clone()
+    };
+    let out_wide = run_pipeline(&dataset.join("video.mp4"), &wide_config, &Silent).unwrap();
+    assert_eq!(out_wide.records.len(), out.records.len());
+    let seen = |o: &vpcal::PipelineOutput| -> Vec<_> {
+        o.records
+            .iter()
+            .filter(|r| r.prediction.is_some())
+            .map(|r| (r.frame, r.crop_box, r.vp1))
+            .collect()
+    };
+    let (narrow, wide) = (seen(&out), seen(&out_wide));
+    assert_eq!(narrow.len(), wide.len());
+    assert!(narrow
+        .iter()
+        .zip(&wide)
+        .all(|(a, b)| a.0 == b.0 && a.1 == b.1));
+    assert!(
+        narrow
+            .iter()
+            .zip(&wide)
+            .any(|(a, b)| (a.2 - b.2).norm() > 1.0),
+        "the network saw other crops"
+    );
+    assert_eq!(
+        vpcal::output::calibration_file(&out_wide, &wide_config, &cal, &agg).settings
+            ["min_crop_px"],
+        serde_json::json!(200.0)
+    );
 }
 
 /// Project road-frame points the way `cv2.projectPoints` does with zero distortion.
