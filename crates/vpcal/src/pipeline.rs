@@ -619,9 +619,7 @@ fn near_vps(
     )
 }
 
-/// A crop waiting for its batch: frame, score, crop box, detector box, edgelets in the box,
-/// and the followed vehicle it belongs to.
-/// A crop on its way to the network: frame, score, the record's box (the detection's
+/// A crop waiting for its batch: frame, score, the record's box (the detection's
 /// integer box), the detector's box, edgelets, vehicle, and the box the crop was cut at
 /// (the VPs' frame; larger than the record's box for small boxes with `min_crop_px`).
 type Pending = (u64, f32, BoxPx, BoxPx, Vec<Edgelet>, Option<u64>, BoxPx);
