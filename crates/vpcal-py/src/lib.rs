@@ -115,6 +115,9 @@ fn pipeline_config(d: &Bound<'_, PyDict>) -> PyResult<PipelineConfig> {
     if let Some(v) = opt(d, "flip_average", "a bool")? {
         c.flip_average = v;
     }
+    if let Some(v) = opt(d, "min_crop_px", "a number")? {
+        c.min_crop_px = v;
+    }
     if let Some(v) = opt(d, "edgelets", "a bool")? {
         c.edgelets = v;
     }

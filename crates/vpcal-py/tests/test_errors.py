@@ -45,6 +45,8 @@ def test_the_same_message_as_the_cli(tmp_path, cli):
         ({"markings": (9.0, 0.0)}, ValueError, "markings: expected the dash period"),
         ({"markings": "xx"}, ValueError, r"markings: expected .* or one of the standards cz"),
         ({"max_records": 0}, vpcal.VpcalError, "--max-records must be at least 1"),
+        ({"min_crop_px": -5.0}, vpcal.VpcalError, "--min-crop-px -5"),
+        ({"min_crop_px": "big"}, TypeError, "min_crop_px: expected a number"),
     ],
 )
 def test_bad_settings_name_the_setting(scene, settings, error, message):

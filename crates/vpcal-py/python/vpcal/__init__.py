@@ -71,8 +71,9 @@ class Options:
       ``motorcycles`` (False), ``road_mask`` (a PNG path, motion detector), ``min_score``
       (0.1), ``keep_static`` (False), ``max_per_frame`` (10).
     - Network: ``model`` (the bundled one), ``device`` (``"cpu"``), ``batch`` (32),
-      ``flip_average`` (False), ``crops`` (``"auto"``: a few boxes per followed vehicle above
-      960 px wide, every box below; ``"all"``, ``"few"``).
+      ``flip_average`` (False), ``min_crop_px`` (0: boxes smaller than this are cut with the
+      road around them, ``--min-crop-px``), ``crops`` (``"auto"``: a few boxes per followed
+      vehicle above 960 px wide, every box below; ``"all"``, ``"few"``).
     - Aggregation: ``method`` (``"robust"``, ``"robust-network"``, ``"reference"``),
       ``edgelets`` (True), ``replay`` (True), ``bootstrap`` (30), ``pp`` (``"centre"``,
       ``"bcs"`` or ``(x, y)``), ``focal`` (a known focal length, pixels), ``focal_range``
@@ -89,6 +90,7 @@ class Options:
     device: Optional[str] = None
     batch: Optional[int] = None
     flip_average: Optional[bool] = None
+    min_crop_px: Optional[float] = None
     edgelets: Optional[bool] = None
     replay: Optional[bool] = None
     every: Optional[int] = None
