@@ -86,14 +86,12 @@ pub fn integer_box(b: &BoxPx, width: u32, height: u32) -> Option<IntBox> {
 /// (models/default/MODEL.md, "Context does fix it"). The VPs are decoded in this box's frame;
 /// [`integer_box`] clamps it to the picture when it is cut.
 pub fn context_box(b: &BoxPx, min_side: f64) -> BoxPx {
-    let side = (b.x1 - b.x0).max(b.y1 - b.y0);
+    let side = b.width().max(b.height());
     if !(side > 0.0 && side.is_finite() && min_side > side) {
         return *b;
     }
-    let s = min_side / side;
-    let c = b.center();
-    let (hw, hh) = (0.5 * (b.x1 - b.x0) * s, 0.5 * (b.y1 - b.y0) * s);
-    BoxPx::new(c.x - hw, c.y - hh, c.x + hw, c.y + hh)
+    let (c, half) = (b.center(), b.half_size() * (min_side / side));
+    BoxPx::new(c.x - half.x, c.y - half.y, c.x + half.x, c.y + half.y)
 }
 
 /// Resampling filter for crops (see the module docs).
